@@ -1,0 +1,39 @@
+"""Domain errors of the engine. The web layer maps them to HTTP status codes in one table."""
+
+from __future__ import annotations
+
+
+class CCSMError(Exception):
+    """Base class of every error the engine raises on purpose."""
+
+
+class InvalidContour(CCSMError, ValueError):
+    """A contour cannot be simplified (too few points, NaN coordinates, zero length...)."""
+
+
+class SurfaceFitError(CCSMError):
+    """The CCS could not be fitted (singular collocation system)."""
+
+
+class InvalidParameter(CCSMError, ValueError):
+    """A parameter is out of its range (scale <= 0, t outside [0, 1], ...); the message names it."""
+
+
+class SourceError(CCSMError):
+    """A source file cannot be read: missing, unreadable, unknown format or CRS."""
+
+
+class TileOutOfRange(CCSMError):
+    """A tile index lies outside the tile matrix of its zoom."""
+
+
+class UnknownLayer(CCSMError):
+    """An unknown dataset or layer was asked for."""
+
+
+class StoreNotReady(CCSMError):
+    """The store is still being built or failed to build."""
+
+
+class StoreError(CCSMError):
+    """The store file is missing, corrupt or of another version."""

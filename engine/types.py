@@ -1,0 +1,92 @@
+"""Shared types of the engine.
+
+The simplification parameter ``t``
+----------------------------------
+``t`` is a float in [0, 1] that says how far a contour is generalized along its continuous changing surface
+(CCS): ``t = 0`` is the initial contour ``L0`` at full detail (the source scale), ``t = 1`` is the target
+contour ``Ln`` (the target scale). The CCS is the ruled surface ``S(u, t) = (1 - t) C0(u) + t Cn(u)``, and
+the slice at ``t`` is the cut of the CCS by the horizontal plane at that height (heights are stored as ``t``
+itself, so ``Zmin = 0`` and ``Zmax = 1``). A map zoom ``z`` maps to a scale denominator, the scale to a
+similarity through the regression model, and the similarity to ``t`` through the contour's own Sim(t) table
+(:mod:`engine.regression`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal, TypeAlias
+
+import numpy as np
+from numpy.typing import NDArray
+
+#: (n, 2) float64 coordinates in metres of a projected CRS, (x, y) order.
+Coords: TypeAlias = NDArray[np.float64]
+
+#: Simplification methods every tool of ccsm can compare.
+Method = Literal["ccsm", "dp", "wm", "vw", "original"]
+METHODS: tuple[str, ...] = ("ccsm", "dp", "wm", "vw", "original")
+
+#: Feature ids come from the input file (its id or its index).
+FeatureId: TypeAlias = str | int
+
+
+@dataclass(frozen=True)
+class Contour:
+    """One contour line in the working (projected, metric) CRS.
+
+    Attributes
+    ----------
+    id
+        The input feature's id, or its index in the input.
+    elevation
+        Height of the contour, in the data's vertical unit.
+    coords
+        (n, 2) float64 vertices in metres. A closed ring is stored *without* repeating its first vertex.
+    closed
+        True for a ring, False for an open line (cut by the data's edge); open lines keep both ends fixed.
+    """
+
+    id: FeatureId
+    elevation: float
+    coords: Coords
+    closed: bool
+
+    @property
+    def n_vertices(self) -> int:
+        """Number of stored vertices."""
+        return int(self.coords.shape[0])
+
+
+@dataclass(frozen=True)
+class BadFeature:
+    """A feature that could not be used, and why (``where`` names the file or layer it came from)."""
+
+    id: FeatureId
+    reason: str
+    where: str = ""
+
+
+@dataclass
+class ContourSet:
+    """Contours read from one source, in a metric working CRS, with the CRS facts needed to write them back.
+
+    Attributes
+    ----------
+    contours
+        Usable contours, coordinates in metres of ``working_crs``.
+    working_crs
+        The projected CRS simplification happens in (``"EPSG:32616"``, ...), as an authority string or WKT.
+    source_crs
+        The CRS of the input, as an authority string or WKT.
+    bad_features
+        Every input feature that was left out, with its reason.
+    name
+        A human name for the set (file stem by default).
+    """
+
+    contours: list[Contour]
+    working_crs: str
+    source_crs: str
+    bad_features: list[BadFeature] = field(default_factory=list)
+    name: str = "contours"
+    interval: float | None = None
