@@ -1,0 +1,28 @@
+"""The ``ccsm`` command line: one typer app, one module per command group.
+
+Exit status: 0 on success, 2 on bad input (unreadable file, unknown CRS, bad option), 1 on an internal error.
+"""
+
+from __future__ import annotations
+
+import typer
+
+app = typer.Typer(
+    name="ccsm",
+    help="Continuously generalized terrain contours (CCSM, Qian et al. 2021): simplify, evaluate, serve tiles.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+def _register_commands() -> None:
+    # Each module adds its commands to ``app``; imported here so ``ccsm --help`` lists them all.
+    from app.cli import commands_engine  # noqa: F401  simplify, evaluate
+    from app.cli import commands_service  # noqa: F401  serve, build
+
+
+def main() -> None:
+    """Entry point of the ``ccsm`` console script."""
+    _register_commands()
+    app()

@@ -1,0 +1,1 @@
+"""``ccsm simplify`` and ``ccsm evaluate`` (owned by the engine CLI work)."""

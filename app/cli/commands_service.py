@@ -1,0 +1,1 @@
+"""``ccsm serve`` and ``ccsm build`` (owned by the tile service work)."""

@@ -1,0 +1,177 @@
+"""Build the CCS of every contour of a set, on all cores, with progress reports.
+
+All per-contour work happens here, once: a tile request later only interpolates two stored rows.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from engine.ccs import CCS, build_ccs, slice_area
+from engine.errors import CCSMError
+from engine.params import BuildParams
+from engine.regression import ScaleModel, fit_scale_model
+from engine.tolerances import MIN_VISIBLE_RING_SIDE_M, min_ring_area_for_scale
+from engine.types import BadFeature, Contour, ContourSet
+
+#: Called with (contours done, contours in total) as the build goes.
+ProgressCallback = Callable[[int, int], None]
+
+#: Contours per task sent to a worker process: large enough that pickling is a small share of the work.
+CHUNK = 64
+
+
+@dataclass
+class BuiltSet:
+    """The CCS of every usable contour of a set, and how scales map to t.
+
+    Attributes
+    ----------
+    surfaces
+        One CCS per usable contour, in input order.
+    model
+        The scale model (ladder of scales, regression per group).
+    params
+        The parameters of the build.
+    working_crs, source_crs
+        CRS of the surfaces' coordinates (metres) and of the input.
+    bad_features
+        Input features left out by the reader or the build, each with its reason.
+    """
+
+    surfaces: list[CCS]
+    model: ScaleModel
+    params: BuildParams
+    working_crs: str
+    source_crs: str
+    bad_features: list[BadFeature] = field(default_factory=list)
+    name: str = "contours"
+    interval: float | None = None
+
+
+def vanish_scale(ccs: CCS, model: ScaleModel) -> float:
+    """Smallest scale denominator at which a ring is too small to show (DESIGN.md section 4); inf for lines.
+
+    Below the source scale the ring is L0 and above the target scale it is Ln, so there the answer follows
+    from their areas; in between, the ring's slice at each ladder scale is checked.
+    """
+    if not ccs.closed:
+        return math.inf
+    area0 = slice_area(ccs, 0.0)
+    first = math.sqrt(area0) / MIN_VISIBLE_RING_SIDE_M
+    if first <= model.source_scale:
+        return first
+    for scale, t in zip(model.ladder, ccs.t_at_scale, strict=True):
+        if slice_area(ccs, float(t)) < min_ring_area_for_scale(float(scale)):
+            return float(scale)
+    return max(model.target_scale, math.sqrt(slice_area(ccs, 1.0)) / MIN_VISIBLE_RING_SIDE_M)
+
+
+def _build_chunk(
+    contours: Sequence[Contour], labels: Sequence[int], params: BuildParams, model: ScaleModel
+) -> list[CCS | BadFeature]:
+    out: list[CCS | BadFeature] = []
+    for contour, group in zip(contours, labels, strict=True):
+        try:
+            ccs = build_ccs(contour, params)
+        except CCSMError as exc:
+            out.append(BadFeature(contour.id, str(exc)))
+            continue
+        ccs.group = int(group)
+        ccs.t_at_scale = model.t_table(ccs.group, ccs.sim_t, ccs.sim)
+        ccs.vanish_scale = vanish_scale(ccs, model)
+        out.append(ccs)
+    return out
+
+
+def _single_threaded_blas() -> None:
+    threadpool_limits(1)
+
+
+def default_workers() -> int:
+    """Worker processes: one per core the process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def build_contour_set(
+    contour_set: ContourSet,
+    params: BuildParams | None = None,
+    *,
+    workers: int | None = None,
+    progress: ProgressCallback | None = None,
+) -> BuiltSet:
+    """Build the CCS of every contour of ``contour_set``.
+
+    Parameters
+    ----------
+    contour_set
+        Contours in a metric working CRS.
+    params
+        Build parameters (defaults: 1:50,000 -> 1:500,000).
+    workers
+        Processes to use; None = one per core, 1 = in this process.
+    progress
+        Called with (done, total) after each chunk.
+
+    Returns
+    -------
+    BuiltSet
+        Contours that could not be built are listed in ``bad_features`` with the reason; the rest are built.
+    """
+    params = params or BuildParams()
+    contours = contour_set.contours
+    model, labels = fit_scale_model(contours, params)
+    workers = default_workers() if workers is None else max(1, workers)
+    chunks = [
+        (contours[i : i + CHUNK], labels[i : i + CHUNK].tolist()) for i in range(0, len(contours), CHUNK)
+    ]
+    results: list[CCS | BadFeature] = []
+    done = 0
+    total = len(contours)
+    if progress:
+        progress(0, total)
+    if workers == 1 or len(chunks) <= 1:
+        with threadpool_limits(1):  # small banded solves: BLAS threads only spin
+            for chunk, chunk_labels in chunks:
+                results.extend(_build_chunk(chunk, chunk_labels, params, model))
+                done += len(chunk)
+                if progress:
+                    progress(done, total)
+    else:
+        # One BLAS thread per worker: OpenBLAS's own threads would fight the worker processes for the cores.
+        with ProcessPoolExecutor(max_workers=workers, initializer=_single_threaded_blas) as pool:
+            futures = [pool.submit(_build_chunk, chunk, lab, params, model) for chunk, lab in chunks]
+            for fut, (chunk, _) in zip(futures, chunks, strict=True):
+                results.extend(fut.result())
+                done += len(chunk)
+                if progress:
+                    progress(done, total)
+    surfaces = [r for r in results if isinstance(r, CCS)]
+    bad = list(contour_set.bad_features) + [r for r in results if isinstance(r, BadFeature)]
+    return BuiltSet(
+        surfaces=surfaces,
+        model=model,
+        params=params,
+        working_crs=contour_set.working_crs,
+        source_crs=contour_set.source_crs,
+        bad_features=bad,
+        name=contour_set.name,
+        interval=contour_set.interval,
+    )
+
+
+def t_for_scale_all(built: BuiltSet, scale: float) -> np.ndarray:
+    """t of every surface at one scale denominator: (n,) float64."""
+    from engine.regression import t_for_scale
+
+    return np.array([t_for_scale(built.model.ladder, s.t_at_scale, scale) for s in built.surfaces])

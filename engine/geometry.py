@@ -1,0 +1,70 @@
+"""Small polyline measures shared by the engine (lengths, areas, arc-length resampling)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from engine.errors import InvalidParameter
+from engine.types import Coords
+
+
+def closed_path(coords: Coords) -> Coords:
+    """The ring's vertices with its first vertex repeated at the end: (n + 1, 2)."""
+    return np.concatenate([coords, coords[:1]])
+
+
+def segment_lengths(coords: Coords) -> NDArray[np.float64]:
+    """Lengths of the (n - 1) segments of a polyline, in the unit of ``coords``."""
+    return np.hypot(*np.diff(coords, axis=0).T)
+
+
+def cumulative_length(coords: Coords) -> NDArray[np.float64]:
+    """Arc length at each vertex, starting at 0: (n,)."""
+    return np.concatenate([[0.0], np.cumsum(segment_lengths(coords))])
+
+
+def path_length(coords: Coords, closed: bool = False) -> float:
+    """Length of a polyline, or of a ring including its closing segment."""
+    path = closed_path(coords) if closed else coords
+    return float(segment_lengths(path).sum())
+
+
+def ring_area(coords: Coords) -> float:
+    """Unsigned area of a ring (shoelace), in squared units of ``coords``.
+
+    >>> ring_area(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]]))
+    2.0
+    """
+    x, y = coords[:, 0], coords[:, 1]
+    return float(abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))) / 2.0)
+
+
+def points_at_lengths(coords: Coords, cumlen: NDArray[np.float64], at: NDArray[np.float64]) -> Coords:
+    """Points of a polyline at given arc lengths (clamped to the line), by linear interpolation."""
+    return np.column_stack([np.interp(at, cumlen, coords[:, 0]), np.interp(at, cumlen, coords[:, 1])])
+
+
+def resample_by_arclength(coords: Coords, n_points: int) -> Coords:
+    """``n_points`` points equally spaced along a polyline, both ends included.
+
+    Parameters
+    ----------
+    coords
+        (n, 2) polyline, n >= 2, with positive length.
+    n_points
+        Number of output points, >= 2.
+
+    Returns
+    -------
+    (n_points, 2) float64
+
+    Examples
+    --------
+    >>> resample_by_arclength(np.array([[0.0, 0.0], [4.0, 0.0]]), 3).tolist()
+    [[0.0, 0.0], [2.0, 0.0], [4.0, 0.0]]
+    """
+    if n_points < 2:
+        raise InvalidParameter(f"n_points must be >= 2, got {n_points}")
+    cumlen = cumulative_length(coords)
+    return points_at_lengths(coords, cumlen, np.linspace(0.0, cumlen[-1], n_points))

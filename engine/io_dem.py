@@ -1,0 +1,351 @@
+"""Contours from a DEM: GeoTIFF, ESRI ASCII grid, or the ``.npz`` layout of matplotlib's sample DEM."""
+
+from __future__ import annotations
+
+import math
+import os
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import contourpy
+import numpy as np
+import pyproj
+import rasterio
+from numpy.typing import NDArray
+from rasterio.errors import RasterioError
+
+from engine.crs import WGS84, parse_crs
+from engine.errors import InvalidParameter, SourceError
+from engine.io_vector import LineParts, assemble_contours
+from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
+from engine.types import BadFeature, ContourSet, FeatureId
+
+#: File extensions read as DEMs.
+RASTER_SUFFIXES: tuple[str, ...] = (".tif", ".tiff", ".asc")
+NPZ_SUFFIXES: tuple[str, ...] = (".npz",)
+DEM_SUFFIXES: tuple[str, ...] = RASTER_SUFFIXES + NPZ_SUFFIXES
+
+#: Contours are traced this far (in the DEM's vertical unit, metres in practice) above their nominal level.
+#: DEMs with whole-metre heights put grid nodes exactly on multiples of the interval; tracing there makes
+#: repeated vertices and zero-length pieces (DESIGN.md section 6). A millimetre is far below any DEM's
+#: accuracy.
+LEVEL_OFFSET = 1e-3
+
+#: A traced line whose every vertex lies within this many pixels of a grid node is not a contour but a
+#: by-product of :data:`LEVEL_OFFSET`: grid nodes *at* the level (a pit bottom or a flat ridge of whole-metre
+#: heights) make the true contour a point or a doubled segment, and tracing 1 mm higher wraps them in a ring a
+#: few millimetres wide. Such vertices sit LEVEL_OFFSET / (height step) pixels from the node: at most 0.001
+#: pixel for whole-metre heights; in the sample DEM the next line's farthest vertex is 0.077 pixel off a node.
+#: The same distance decides that an open line whose two ends nearly touch (at a node on the data's edge that
+#: is exactly at the level) is a ring.
+NODE_SNAP_PX = 0.01
+
+#: More levels than this means the interval is wrong for the data (a 0.01 m interval on a mountain range).
+MAX_LEVELS = 5000
+
+#: Keys of the ``.npz`` layout (matplotlib's ``jacksboro_fault_dem.npz``).
+NPZ_KEYS: tuple[str, ...] = ("elevation", "xmin", "xmax", "ymin", "ymax", "dx", "dy")
+
+
+@dataclass(frozen=True)
+class DemGrid:
+    """A DEM in memory.
+
+    Attributes
+    ----------
+    z
+        (rows, cols) float64 heights, masked where there is no data.
+    transform
+        (a, b, c, d, e, f): the grid corner at column ``u``, row ``v`` (pixel edges, so pixel (r, k) spans
+        u in [k, k + 1]) is at x = a·u + b·v + c, y = d·u + e·v + f in ``crs`` (GDAL's geotransform order,
+        as in :class:`affine.Affine`).
+    crs
+        The CRS of the grid.
+    """
+
+    z: np.ma.MaskedArray
+    transform: tuple[float, float, float, float, float, float]
+    crs: pyproj.CRS
+
+
+def contours_from_dem(
+    path: str | os.PathLike[str],
+    *,
+    interval: float,
+    tolerances: Tolerances = DEFAULT_TOLERANCES,
+) -> ContourSet:
+    """Trace contour lines from a DEM at every multiple of ``interval``.
+
+    Parameters
+    ----------
+    path
+        ``.tif`` / ``.tiff`` (GeoTIFF), ``.asc`` (ESRI ASCII grid with its ``.prj``), or ``.npz`` in the
+        layout of matplotlib's sample DEM (keys elevation, xmin, xmax, ymin, ymax, dx, dy; EPSG:4326).
+    interval
+        Contour interval in the DEM's vertical unit; levels are the multiples of it within the data's range.
+    tolerances
+        Cleaning distances in metres (see :func:`engine.io_vector.assemble_contours`).
+
+    Returns
+    -------
+    ContourSet
+        Contours in metres of the working CRS, ``elevation`` the nominal multiple of ``interval`` (lines are
+        traced :data:`LEVEL_OFFSET` above it), ids ``"{elevation}:{k}"`` with k counting the lines of that
+        level, closed rings (first == last from contourpy) stored without their repeated vertex,
+        ``interval`` set.
+
+    Raises
+    ------
+    InvalidParameter
+        ``interval`` is not a positive number, or gives more than :data:`MAX_LEVELS` levels.
+    SourceError
+        The file is missing, unreadable, of an unknown format, has no CRS, or yields no contour.
+    """
+    if not (isinstance(interval, (int, float)) and math.isfinite(interval) and interval > 0):
+        raise InvalidParameter(f"interval {interval!r} must be a positive number")
+    path = Path(path)
+    grid = read_dem(path)
+    parts = trace_contours(grid, float(interval), where=path.name)
+    return assemble_contours(
+        parts,
+        source_crs=grid.crs,
+        where=path.name,
+        name=path.stem,
+        tolerances=tolerances,
+        interval=float(interval),
+    )
+
+
+def read_dem(path: str | os.PathLike[str]) -> DemGrid:
+    """Read a DEM's first band, its geotransform and its CRS.
+
+    Raises
+    ------
+    SourceError
+        Missing or unreadable file, unknown format, missing or unknown CRS.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise SourceError(f"{path}: file not found")
+    suffix = path.suffix.lower()
+    if suffix in NPZ_SUFFIXES:
+        return _read_npz(path)
+    if suffix in RASTER_SUFFIXES:
+        return _read_raster(path)
+    raise SourceError(f"{path}: unknown DEM format {path.suffix!r}; expected one of {DEM_SUFFIXES}")
+
+
+def _read_raster(path: Path) -> DemGrid:
+    try:
+        with rasterio.open(path) as src:
+            if src.crs is None:
+                hint = " (is the .prj file missing?)" if path.suffix.lower() == ".asc" else ""
+                raise SourceError(f"{path}: the DEM has no CRS{hint}")
+            crs = parse_crs(src.crs.to_wkt(), where=str(path))
+            z = src.read(1, masked=True).astype(np.float64)
+            t = src.transform
+            geotransform = (t.a, t.b, t.c, t.d, t.e, t.f)
+    except RasterioError as exc:
+        raise SourceError(f"{path}: cannot read DEM ({exc})") from exc
+    z = np.ma.masked_invalid(z)
+    return DemGrid(z=z, transform=geotransform, crs=crs)
+
+
+def _read_npz(path: Path) -> DemGrid:
+    """Read the ``.npz`` layout of matplotlib's ``jacksboro_fault_dem.npz``.
+
+    Row 0 lies at ``ymin`` and column 0 at ``xmin``; rows run towards ``ymax``, columns towards ``xmax``.
+    In matplotlib's file ``ymin`` (36.733°) is the *northern* edge, so row 0 is north, as in any image:
+    the names describe the array order, not the compass. Checked against the terrain: with row 0 north the
+    Pine Mountain ridge runs south-west to north-east and the low Valley and Ridge lies south-east, as on a
+    map.
+
+    Pixel centres or edges: in matplotlib's file (xmax - xmin) / dx = 403.000 for 403 columns and
+    (ymin - ymax) / dy = 344.000 for 344 rows, so the four values are the outer *edges* of the grid (centres
+    would span one pixel less) and the first pixel's centre is half a pixel inside. Other files are judged the
+    same way: a span of n pixels means edges, of n - 1 pixels means centres, anything else is an error.
+    The CRS is the ``crs`` key when present, else EPSG:4326.
+    """
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            missing = [k for k in NPZ_KEYS if k not in data.files]
+            if missing:
+                raise SourceError(
+                    f"{path}: not a DEM .npz: missing keys {missing} (has {sorted(data.files)}; "
+                    f"expected {list(NPZ_KEYS)})"
+                )
+            z = np.asarray(data["elevation"], dtype=np.float64)
+            xmin, xmax, ymin, ymax, dx, dy = (
+                float(data[k]) for k in ("xmin", "xmax", "ymin", "ymax", "dx", "dy")
+            )
+            crs_text = str(data["crs"]) if "crs" in data.files else WGS84
+    except (OSError, ValueError, zipfile.BadZipFile) as exc:
+        raise SourceError(f"{path}: cannot read DEM .npz ({exc})") from exc
+    if z.ndim != 2 or min(z.shape) < 2:
+        raise SourceError(f"{path}: elevation must be a 2-D grid of at least 2 x 2, got shape {z.shape}")
+    if not (dx > 0 and dy > 0):
+        raise SourceError(f"{path}: dx and dy must be positive, got {dx}, {dy}")
+    rows, cols = z.shape
+    x0 = _first_edge(xmin, xmax, dx, cols, "x", path)
+    y0 = _first_edge(ymin, ymax, dy, rows, "y", path)
+    sx = 1.0 if xmax >= xmin else -1.0
+    sy = 1.0 if ymax >= ymin else -1.0
+    crs = parse_crs(crs_text, where=str(path))
+    return DemGrid(z=np.ma.masked_invalid(z), transform=(sx * dx, 0.0, x0, 0.0, sy * dy, y0), crs=crs)
+
+
+def _first_edge(v_first: float, v_last: float, step: float, n: int, axis: str, path: Path) -> float:
+    """Outer edge of the first pixel along one axis, given the layout's two bounding values."""
+    pixels = abs(v_last - v_first) / step
+    direction = 1.0 if v_last >= v_first else -1.0
+    if math.isclose(pixels, n, abs_tol=1e-3):
+        return v_first  # the values are the grid's outer edges (matplotlib's file)
+    if math.isclose(pixels, n - 1, abs_tol=1e-3):
+        return v_first - direction * step / 2.0  # the values are the first and last pixel centres
+    raise SourceError(
+        f"{path}: {axis} bounds span {pixels:.3f} pixels of {step} for {n} pixels; "
+        "cannot tell the grid's geometry"
+    )
+
+
+def contour_levels(zmin: float, zmax: float, interval: float) -> NDArray[np.float64]:
+    """Nominal levels: every multiple of ``interval`` within [zmin, zmax].
+
+    >>> contour_levels(236.0, 1076.0, 20.0)[[0, -1]].tolist()
+    [240.0, 1060.0]
+    """
+    first = math.ceil(zmin / interval)
+    last = math.floor(zmax / interval)
+    if last - first + 1 > MAX_LEVELS:
+        raise InvalidParameter(
+            f"interval {interval} gives {last - first + 1} levels over [{zmin}, {zmax}] "
+            f"(more than {MAX_LEVELS})"
+        )
+    # Rounding keeps 0.1 · 3 at 0.3, so elevations and ids read as the user typed the interval.
+    return np.round(np.arange(first, last + 1, dtype=np.float64) * interval, 9)
+
+
+def trace_contours(grid: DemGrid, interval: float, *, where: str) -> LineParts:
+    """Trace the contours of a grid with contourpy and map them to the grid's CRS.
+
+    Parameters
+    ----------
+    grid
+        The DEM.
+    interval
+        Contour interval, in the DEM's vertical unit.
+    where
+        File name for messages.
+
+    Returns
+    -------
+    LineParts
+        Lines in the grid's CRS; a closed ring repeats its first vertex at the end, as contourpy returns it.
+
+    Raises
+    ------
+    SourceError
+        The grid has no data or no level falls within its range.
+    """
+    z = grid.z
+    if z.count() == 0:
+        raise SourceError(f"{where}: the DEM has no valid heights")
+    zmin, zmax = float(z.min()), float(z.max())
+    levels = contour_levels(zmin, zmax, interval)
+    # Traced in grid index space (x = column, y = row of the pixel centre), then mapped by the geotransform in
+    # one step: this handles north-up, south-up and rotated grids alike.
+    generator = contourpy.contour_generator(
+        z=z, name="serial", line_type=contourpy.LineType.ChunkCombinedOffset, chunk_size=0
+    )
+    pieces: list[NDArray[np.float64]] = []
+    counts: list[NDArray[np.int64]] = []
+    ids: list[FeatureId] = []
+    elevations: list[float] = []
+    for level in levels.tolist():
+        # ChunkCombinedOffset with one chunk: ([points (n, 2)] or [None], [offsets (m + 1,)] or [None]).
+        lines: Any = generator.lines(level + LEVEL_OFFSET)
+        points, offsets = lines
+        if not points or points[0] is None:
+            continue
+        pts = np.asarray(points[0], dtype=np.float64)
+        off = np.asarray(offsets[0], dtype=np.int64)
+        pieces.append(pts)
+        counts.append(np.diff(off))
+        label = f"{level:.10g}"
+        ids.extend(f"{label}:{k}" for k in range(len(off) - 1))
+        elevations.extend([level] * (len(off) - 1))
+    if not pieces:
+        raise SourceError(
+            f"{where}: no contour at interval {interval:g} within the DEM's range [{zmin:g}, {zmax:g}]"
+        )
+    uv = np.vstack(pieces)
+    counts_all = np.concatenate(counts)
+    uv, counts_all, ids, elevations, bad = _drop_node_artefacts(uv, counts_all, ids, elevations, where)
+    uv, counts_all = _close_touching_rings(uv, counts_all)
+    uv = uv + 0.5  # pixel centres sit half a pixel inside the pixel edges
+    a, b, c, d, e, f = grid.transform
+    xy = np.column_stack([a * uv[:, 0] + b * uv[:, 1] + c, d * uv[:, 0] + e * uv[:, 1] + f])
+    return LineParts(
+        xy=xy,
+        offsets=np.concatenate([[0], np.cumsum(counts_all)]).astype(np.int64),
+        ids=ids,
+        elevations=np.asarray(elevations, dtype=np.float64),
+        bad=bad,
+    )
+
+
+def _drop_node_artefacts(
+    uv: NDArray[np.float64],
+    counts: NDArray[np.int64],
+    ids: list[FeatureId],
+    elevations: list[float],
+    where: str,
+) -> tuple[NDArray[np.float64], NDArray[np.int64], list[FeatureId], list[float], list[BadFeature]]:
+    """Remove lines that hug grid nodes (see :data:`NODE_SNAP_PX`); they are reported, not kept.
+
+    ``uv`` are (N, 2) vertices in grid index space (column, row of pixel centres), ``counts`` the vertices
+    per line.
+    """
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    off_node = np.abs(uv - np.round(uv)).max(axis=1)  # contourpy's vertices lie on grid edges
+    farthest = np.maximum.reduceat(off_node, starts)
+    artefact = farthest < NODE_SNAP_PX
+    if not artefact.any():
+        return uv, counts, ids, elevations, []
+    bad = [
+        BadFeature(
+            ids[k],
+            f"degenerate contour: grid nodes lie exactly at {elevations[k]:.10g}, so the line only "
+            f"circles them within {NODE_SNAP_PX:g} pixel",
+            where,
+        )
+        for k in np.flatnonzero(artefact)
+    ]
+    keep_line = ~artefact
+    keep_vertex = np.repeat(keep_line, counts)
+    ids = [ids[k] for k in np.flatnonzero(keep_line)]
+    elevations = [elevations[k] for k in np.flatnonzero(keep_line)]
+    return uv[keep_vertex], counts[keep_line], ids, elevations, bad
+
+
+def _close_touching_rings(
+    uv: NDArray[np.float64], counts: NDArray[np.int64]
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Close open lines whose ends lie within :data:`NODE_SNAP_PX` of each other (repeat the first vertex).
+
+    Such a line is a ring touching the data's edge at a node exactly at the level; tracing 1 mm above the
+    level leaves a gap of a few centimetres that would otherwise decide, after any rounding, whether it is
+    a ring.
+    """
+    if len(counts) == 0:
+        return uv, counts
+    ends = np.cumsum(counts)
+    starts = ends - counts
+    gap = np.hypot(*(uv[ends - 1] - uv[starts]).T)
+    touching = (gap > 0) & (gap < NODE_SNAP_PX) & (counts >= 3)
+    if not touching.any():
+        return uv, counts
+    uv = np.insert(uv, ends[touching], uv[starts[touching]], axis=0)
+    return uv, counts + touching.astype(np.int64)

@@ -1,0 +1,663 @@
+"""Contour lines from and to vector files (GeoJSON, GeoPackage, Shapefile), and the cleaning of all sources.
+
+Reading is vectorised: pyogrio returns all geometries as WKB, shapely flattens them into one (N, 2) array with
+a part index, and one pyproj call projects every vertex. Python loops run per feature, never per vertex.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import uuid
+from collections import Counter
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyproj
+import shapely
+from numpy.typing import NDArray
+from pyogrio import list_layers
+from pyogrio.errors import DataLayerError, DataSourceError
+from pyogrio.raw import read as ogr_read
+
+from engine.crs import (
+    WGS84,
+    as_coords,
+    choose_working_crs,
+    crs_to_string,
+    lonlat_validity,
+    make_transformer,
+    parse_crs,
+)
+from engine.errors import InvalidContour, SourceError
+from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
+from engine.types import BadFeature, Contour, ContourSet, Coords, FeatureId
+
+#: Names of the elevation attribute, tried in this order, case-insensitively.
+ELEVATION_FIELDS: tuple[str, ...] = ("ele", "elev", "elevation", "z", "height", "contour")
+
+#: File extensions read as contour lines.
+VECTOR_SUFFIXES: tuple[str, ...] = (".geojson", ".json", ".gpkg", ".shp")
+
+#: shapely geometry type ids (``shapely.get_type_id``) that are lines.
+_LINE_TYPES = (1, 2)  # LineString, LinearRing
+_MULTI_LINE = 5  # MultiLineString
+_TYPE_NAMES = {
+    0: "Point",
+    1: "LineString",
+    2: "LinearRing",
+    3: "Polygon",
+    4: "MultiPoint",
+    5: "MultiLineString",
+    6: "MultiPolygon",
+    7: "GeometryCollection",
+}
+
+
+@dataclass
+class LineParts:
+    """Candidate contour lines in the source CRS, before cleaning (one entry per line part).
+
+    Attributes
+    ----------
+    xy
+        (N, 2) float64 vertices of all parts, concatenated, in the source CRS.
+    offsets
+        (m + 1,) int64: part k is ``xy[offsets[k]:offsets[k + 1]]``.
+    ids
+        m feature ids.
+    elevations
+        (m,) float64 elevations (all finite: features without one are already in ``bad``).
+    bad
+        Features already rejected (bad geometry type, no elevation, ...).
+    """
+
+    xy: Coords
+    offsets: NDArray[np.int64]
+    ids: list[FeatureId]
+    elevations: NDArray[np.float64]
+    bad: list[BadFeature] = field(default_factory=list)
+
+
+def read_contours(
+    path: str | os.PathLike[str],
+    *,
+    elevation_field: str | None = None,
+    layer: str | None = None,
+    tolerances: Tolerances = DEFAULT_TOLERANCES,
+) -> ContourSet:
+    """Read contour lines from a GeoJSON, GeoPackage or Shapefile.
+
+    Parameters
+    ----------
+    path
+        The file (``.geojson``, ``.json``, ``.gpkg``, ``.shp``).
+    elevation_field
+        Name of the elevation attribute. By default the first field named (case-insensitively) ``ele``,
+        ``elev``, ``elevation``, ``z``, ``height`` or ``contour``, tried in that order.
+    layer
+        Layer name of a multi-layer file (GeoPackage); the first layer by default.
+    tolerances
+        ``duplicate_m`` merges consecutive vertices and closes rings, ``zero_length_m`` rejects dots.
+
+    Returns
+    -------
+    ContourSet
+        Contours in metres of the working CRS (:func:`engine.crs.choose_working_crs`); one contour per
+        LineString and per MultiLineString part (id ``"{fid}:{part}"``); closed rings without their repeated
+        last vertex. Unusable features are listed in ``bad_features`` with a reason.
+
+    Raises
+    ------
+    SourceError
+        The file is missing or unreadable, the layer or the elevation field does not exist, the CRS is
+        missing or unknown (GeoJSON without one is EPSG:4326), or no feature is usable.
+    """
+    path = Path(path)
+    where = path.name
+    if not path.exists():
+        raise SourceError(f"{path}: file not found")
+    if path.suffix.lower() not in VECTOR_SUFFIXES:
+        raise SourceError(
+            f"{path}: unknown contour format {path.suffix!r}; expected one of {VECTOR_SUFFIXES}"
+        )
+    try:
+        if layer is None:
+            # Name the first layer explicitly: pyogrio warns when it has to pick one of several itself.
+            layer = str(list_layers(path)[0][0])
+        meta, fids, wkb, field_data = ogr_read(path, layer=layer, return_fids=True)
+    except DataLayerError as exc:
+        raise SourceError(f"{path}: cannot open layer {layer!r} ({exc})") from exc
+    except (DataSourceError, RuntimeError, IndexError) as exc:
+        raise SourceError(f"{path}: cannot read contours ({exc})") from exc
+
+    crs_text = meta.get("crs")
+    if not crs_text:
+        if path.suffix.lower() in (".geojson", ".json"):
+            crs_text = WGS84  # RFC 7946: GeoJSON without a crs member is longitude/latitude on WGS 84
+        else:
+            hint = " (is the .prj file missing?)" if path.suffix.lower() == ".shp" else ""
+            raise SourceError(f"{path}: the file has no CRS{hint}")
+    source_crs = parse_crs(crs_text, where=str(path))
+
+    field_names = [str(name) for name in meta["fields"]]
+    elev_index = _find_elevation_field(field_names, elevation_field, path)
+    id_index = next((i for i, name in enumerate(field_names) if name.lower() == "id"), None)
+    n_features = len(wkb)
+    if n_features == 0:
+        raise SourceError(f"{path}: no features")
+    feature_ids = _feature_ids(fids, field_data[id_index] if id_index is not None else None, n_features)
+    elevations, elev_reasons = _parse_elevations(field_data[elev_index], field_names[elev_index])
+
+    parts = _explode_lines(wkb, feature_ids, elevations, elev_reasons, where)
+    return assemble_contours(parts, source_crs=source_crs, where=where, name=path.stem, tolerances=tolerances)
+
+
+def _find_elevation_field(field_names: Sequence[str], requested: str | None, path: Path) -> int:
+    """Index of the elevation field among ``field_names`` (case-insensitive)."""
+    lower = [name.lower() for name in field_names]
+    if requested is not None:
+        if requested in field_names:
+            return field_names.index(requested)
+        if requested.lower() in lower:
+            return lower.index(requested.lower())
+        raise SourceError(
+            f"{path}: elevation field {requested!r} not found; "
+            f"available fields: {', '.join(field_names) or 'none'}"
+        )
+    for candidate in ELEVATION_FIELDS:
+        if candidate in lower:
+            return lower.index(candidate)
+    raise SourceError(
+        f"{path}: no elevation field found (looked for {', '.join(ELEVATION_FIELDS)}); "
+        f"available fields: {', '.join(field_names) or 'none'}; pass elevation_field"
+    )
+
+
+def _to_feature_id(value: Any) -> FeatureId | None:
+    """A JSON-friendly id from a field value (None when the value is missing)."""
+    if value is None:
+        return None
+    if isinstance(value, (bool, np.bool_)):
+        return int(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        if not math.isfinite(value):
+            return None
+        return int(value) if float(value).is_integer() else str(value)
+    text = str(value)
+    return text if text else None
+
+
+def _feature_ids(fids: NDArray[Any] | None, id_values: NDArray[Any] | None, n: int) -> list[FeatureId]:
+    """Per feature: its ``id`` field when set, else the file's FID, else its index."""
+    ids: list[FeatureId] = []
+    for i in range(n):
+        fid: FeatureId | None = None
+        if id_values is not None:
+            fid = _to_feature_id(id_values[i])
+        if fid is None and fids is not None:
+            fid = _to_feature_id(fids[i])
+        ids.append(i if fid is None else fid)
+    return ids
+
+
+def _parse_elevations(values: NDArray[Any], name: str) -> tuple[NDArray[np.float64], list[str | None]]:
+    """Elevations as float64 (NaN when unusable) and, per feature, why it is unusable (None when fine)."""
+    n = len(values)
+    reasons: list[str | None] = [None] * n
+    if values.dtype.kind in "iuf":
+        elevations = values.astype(np.float64)
+        for j in np.flatnonzero(~np.isfinite(elevations)).tolist():
+            v = elevations[j]
+            reasons[j] = (
+                f"no elevation in field {name!r}"
+                if np.isnan(v)
+                else f"elevation {v} in field {name!r} is not finite"
+            )
+        return elevations, reasons
+    # Text (or mixed) fields: GDAL makes a field a string as soon as one feature holds text.
+    elevations = np.full(n, np.nan, dtype=np.float64)
+    for i, value in enumerate(values):
+        if value is None or (isinstance(value, str) and not value.strip()):
+            reasons[i] = f"no elevation in field {name!r}"
+            continue
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            reasons[i] = f"elevation {value!r} in field {name!r} is not a number"
+            continue
+        if math.isnan(number):
+            reasons[i] = f"no elevation in field {name!r}"
+        elif not math.isfinite(number):
+            reasons[i] = f"elevation {value!r} in field {name!r} is not finite"
+        else:
+            elevations[i] = number
+    return elevations, reasons
+
+
+def _explode_lines(
+    wkb: NDArray[Any],
+    feature_ids: list[FeatureId],
+    elevations: NDArray[np.float64],
+    elev_reasons: list[str | None],
+    where: str,
+) -> LineParts:
+    """Split features into line parts (one per LineString or MultiLineString part), rejecting the rest."""
+    with np.errstate(invalid="ignore"):  # NaN coordinates are reported per feature below, not warned about
+        geoms = shapely.from_wkb(wkb)
+    type_ids = shapely.get_type_id(geoms)  # -1 for a missing geometry
+    bad: list[BadFeature] = []
+    keep_geoms = []
+    part_ids: list[FeatureId] = []
+    part_elev: list[float] = []
+    for i, (geom, type_id) in enumerate(zip(geoms, type_ids, strict=True)):
+        fid = feature_ids[i]
+        reason: str | None = None
+        if geom is None or type_id < 0:
+            reason = "no geometry"
+        elif type_id not in _LINE_TYPES and type_id != _MULTI_LINE:
+            reason = f"{_TYPE_NAMES.get(int(type_id), 'geometry')} is not a line"
+        elif shapely.is_empty(geom):
+            reason = "empty geometry"
+        else:
+            reason = elev_reasons[i]
+        if reason is not None:
+            bad.append(BadFeature(fid, reason, where))
+            continue
+        if type_id == _MULTI_LINE:
+            for k, part in enumerate(shapely.get_parts(geom)):
+                keep_geoms.append(part)
+                part_ids.append(f"{fid}:{k}")
+                part_elev.append(float(elevations[i]))
+        else:
+            keep_geoms.append(geom)
+            part_ids.append(fid)
+            part_elev.append(float(elevations[i]))
+    if keep_geoms:
+        xy, index = shapely.get_coordinates(np.asarray(keep_geoms, dtype=object), return_index=True)
+        counts = np.bincount(index, minlength=len(keep_geoms))
+    else:
+        xy = np.empty((0, 2), dtype=np.float64)
+        counts = np.zeros(0, dtype=np.int64)
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    return LineParts(
+        xy=np.ascontiguousarray(xy, dtype=np.float64),
+        offsets=offsets,
+        ids=part_ids,
+        elevations=np.asarray(part_elev, dtype=np.float64),
+        bad=bad,
+    )
+
+
+def assemble_contours(
+    parts: LineParts,
+    *,
+    source_crs: pyproj.CRS,
+    where: str,
+    name: str,
+    tolerances: Tolerances = DEFAULT_TOLERANCES,
+    interval: float | None = None,
+) -> ContourSet:
+    """Validate, project and clean line parts into a :class:`ContourSet` (shared by vector and DEM sources).
+
+    Per part, in this order: coordinates must be finite and valid for ``source_crs`` (see
+    :func:`engine.crs.lonlat_validity`); all vertices are projected to the working CRS in one call; a part
+    whose ends lie within ``tolerances.duplicate_m`` is a closed ring and loses its repeated last vertex;
+    consecutive vertices closer than ``duplicate_m`` are merged (the first is kept); a line needs 2 distinct
+    vertices, a ring 3, and a length of at least ``tolerances.zero_length_m``.
+
+    Parameters
+    ----------
+    parts
+        Line parts in ``source_crs``.
+    source_crs
+        Their CRS.
+    where
+        File name recorded in each :class:`BadFeature`.
+    name
+        Name of the set.
+    tolerances
+        Distances in metres of the working CRS.
+    interval
+        Contour interval; inferred from the elevations when None.
+
+    Returns
+    -------
+    ContourSet
+
+    Raises
+    ------
+    SourceError
+        No part is usable.
+    """
+    bad = list(parts.bad)
+    n_parts = len(parts.ids)
+    counts = np.diff(parts.offsets)
+    part_of = np.repeat(np.arange(n_parts), counts)
+    xy = parts.xy
+    ok = counts > 0
+    reasons: dict[int, str] = {int(k): "empty geometry" for k in np.flatnonzero(~ok)}
+
+    # 1. NaN / inf coordinates.
+    finite_vertex: NDArray[np.bool_] = np.asarray(np.isfinite(xy).all(axis=1), dtype=np.bool_)
+    for k in np.unique(part_of[~finite_vertex]):
+        reasons.setdefault(int(k), "NaN or infinite coordinates")
+    ok &= _all_per_part(finite_vertex, part_of, n_parts)
+
+    # 2. Out of range for the source CRS (|lat| > 90, outside the projection's area of use...).
+    candidate = ok[part_of]
+    lonlat = np.full_like(xy, np.nan)
+    valid_vertex = np.zeros(len(xy), dtype=bool)
+    if candidate.any():
+        lonlat[candidate], valid_vertex[candidate] = lonlat_validity(source_crs, xy[candidate])
+    crs_label = _short_crs_name(source_crs)
+    for k in np.unique(part_of[candidate & ~valid_vertex]):
+        first_bad = int(np.flatnonzero((part_of == k) & ~valid_vertex)[0])
+        x, y = xy[first_bad]
+        reasons.setdefault(int(k), f"coordinates out of range for {crs_label} ({x:.8g}, {y:.8g})")
+    ok &= _all_per_part(valid_vertex | ~candidate, part_of, n_parts)
+
+    if not ok.any():
+        _raise_nothing_usable(where, parts, reasons, bad)
+
+    # 3. The working CRS from the extent of the usable parts, and one projection call for all their vertices.
+    use = ok[part_of]
+    ll = lonlat[use]
+    bounds = (float(ll[:, 0].min()), float(ll[:, 1].min()), float(ll[:, 0].max()), float(ll[:, 1].max()))
+    source_text = crs_to_string(source_crs)
+    working_crs = choose_working_crs(source_text, bounds)
+    projected = np.full_like(xy, np.nan)
+    projected[use] = make_transformer(source_text, working_crs)(xy[use])
+    projected_ok = np.isfinite(projected).all(axis=1) | ~use
+    for k in np.unique(part_of[~projected_ok]):
+        reasons.setdefault(int(k), f"coordinates cannot be projected to {working_crs}")
+    ok &= _all_per_part(projected_ok, part_of, n_parts)
+
+    # 4. Rings, duplicate vertices, too few points, zero length.
+    dup = float(tolerances.duplicate_m)
+    starts = parts.offsets[:-1]
+    ends = parts.offsets[1:] - 1
+    closed = np.zeros(n_parts, dtype=bool)
+    has_two = ok & (counts >= 2)
+    gap = np.full(n_parts, np.inf)
+    gap[has_two] = np.hypot(*(projected[ends[has_two]] - projected[starts[has_two]]).T)
+    closed[has_two] = gap[has_two] < dup
+    keep = ok[part_of].copy()
+    keep[ends[closed]] = False  # a ring's repeated last vertex
+    keep = dedup_mask(projected, part_of, keep, closed, dup)
+
+    kept_counts = np.bincount(part_of[keep], minlength=n_parts)
+    lengths = _part_lengths(projected, part_of, keep, closed, n_parts)
+    for k in np.flatnonzero(ok):
+        if kept_counts[k] < 2:
+            reasons[int(k)] = "fewer than 2 distinct points"
+        elif closed[k] and kept_counts[k] < 3:
+            reasons[int(k)] = "closed ring with fewer than 3 distinct points"
+        elif lengths[k] < tolerances.zero_length_m:
+            reasons[int(k)] = f"zero length ({lengths[k]:.3g} m)"
+    for k in sorted(reasons):
+        bad.append(BadFeature(parts.ids[k], reasons[k], where))
+    ok &= np.array([k not in reasons for k in range(n_parts)], dtype=bool)
+    if not ok.any():
+        _raise_nothing_usable(where, parts, reasons, bad)
+
+    kept_xy = projected[keep]
+    kept_offsets = np.concatenate([[0], np.cumsum(kept_counts)])
+    contours = [
+        Contour(
+            id=parts.ids[k],
+            elevation=float(parts.elevations[k]),
+            coords=kept_xy[kept_offsets[k] : kept_offsets[k + 1]],
+            closed=bool(closed[k]),
+        )
+        for k in np.flatnonzero(ok)
+    ]
+    if interval is None:
+        interval = infer_interval(parts.elevations[ok])
+    return ContourSet(
+        contours=contours,
+        working_crs=working_crs,
+        source_crs=source_text,
+        bad_features=bad,
+        name=name,
+        interval=interval,
+    )
+
+
+def _raise_nothing_usable(
+    where: str, parts: LineParts, reasons: dict[int, str], bad: list[BadFeature]
+) -> None:
+    listed = bad + [BadFeature(parts.ids[k], r, where) for k, r in sorted(reasons.items())]
+    sample = "; ".join(f"{b.id}: {b.reason}" for b in listed[:5])
+    more = f" (and {len(listed) - 5} more)" if len(listed) > 5 else ""
+    raise SourceError(f"{where}: no usable contour among {len(listed)} features: {sample}{more}")
+
+
+def _short_crs_name(crs: pyproj.CRS) -> str:
+    text = crs_to_string(crs)
+    return text if len(text) < 40 else str(crs.name)
+
+
+def _all_per_part(flag: NDArray[np.bool_], part_of: NDArray[np.int64], n_parts: int) -> NDArray[np.bool_]:
+    """Per part: True when ``flag`` holds at every one of its vertices (and for parts without vertices)."""
+    failures = np.bincount(part_of[~flag], minlength=n_parts)
+    result: NDArray[np.bool_] = failures == 0
+    return result
+
+
+def dedup_mask(
+    xy: Coords,
+    part_of: NDArray[np.int64],
+    keep: NDArray[np.bool_],
+    closed: NDArray[np.bool_],
+    dup: float,
+) -> NDArray[np.bool_]:
+    """Drop vertices closer than ``dup`` to the previous kept vertex of the same part.
+
+    Greedy along each part, as a sequential scan would do: the first vertex of a part is always kept, a vertex
+    is kept when it lies at least ``dup`` from the last kept one. For a closed part (stored without its
+    repeated vertex) the last kept vertex must also lie at least ``dup`` from the first.
+
+    Parameters
+    ----------
+    xy
+        (N, 2) float64 coordinates in metres (rows with ``keep`` False are ignored and may be NaN).
+    part_of
+        (N,) int part index of each vertex, non-decreasing.
+    keep
+        (N,) bool, vertices still in play.
+    closed
+        (m,) bool per part.
+    dup
+        Distance in metres.
+
+    Returns
+    -------
+    (N,) bool
+        The new keep mask: consecutive kept vertices of a part are never closer than ``dup``.
+    """
+    keep = keep.copy()
+    idx = np.flatnonzero(keep)
+    if len(idx) >= 2:
+        kept_parts = part_of[idx]
+        same = kept_parts[1:] == kept_parts[:-1]
+        step = np.hypot(*(xy[idx[1:]] - xy[idx[:-1]]).T)
+        affected = np.unique(kept_parts[1:][same & (step < dup)])
+        # The scan is sequential (whether a vertex stays depends on which earlier ones stayed), so it runs in
+        # Python, but only over the parts that have a too-close pair at all: few in real data.
+        bounds = np.searchsorted(kept_parts, np.stack([affected, affected + 1]))
+        for lo, hi in bounds.T.tolist():
+            members = idx[lo:hi]
+            xs = xy[members, 0].tolist()
+            ys = xy[members, 1].tolist()
+            last_x, last_y = xs[0], ys[0]
+            for j in range(1, len(members)):
+                if math.hypot(xs[j] - last_x, ys[j] - last_y) < dup:
+                    keep[members[j]] = False
+                else:
+                    last_x, last_y = xs[j], ys[j]
+    # A ring must not end on top of its start.
+    while True:
+        idx = np.flatnonzero(keep)
+        if len(idx) == 0:
+            break
+        kept_parts = part_of[idx]
+        boundaries = np.flatnonzero(np.diff(kept_parts)) + 1
+        first = idx[np.concatenate([[0], boundaries])]
+        last = idx[np.concatenate([boundaries - 1, [len(idx) - 1]])]
+        p = part_of[first]
+        wrap = closed[p] & (last != first)
+        wrap[wrap] = np.hypot(*(xy[last[wrap]] - xy[first[wrap]]).T) < dup
+        if not wrap.any():
+            break
+        keep[last[wrap]] = False
+    return keep
+
+
+def _part_lengths(
+    xy: Coords, part_of: NDArray[np.int64], keep: NDArray[np.bool_], closed: NDArray[np.bool_], n_parts: int
+) -> NDArray[np.float64]:
+    """Length in metres of each part's kept vertices (rings include their closing segment)."""
+    idx = np.flatnonzero(keep)
+    lengths = np.zeros(n_parts, dtype=np.float64)
+    if len(idx) < 2:
+        return lengths
+    same = part_of[idx[1:]] == part_of[idx[:-1]]
+    step = np.hypot(*(xy[idx[1:]] - xy[idx[:-1]]).T)
+    np.add.at(lengths, part_of[idx[1:]][same], step[same])
+    kept_parts = part_of[idx]
+    boundaries = np.flatnonzero(np.diff(kept_parts)) + 1
+    first = idx[np.concatenate([[0], boundaries])]
+    last = idx[np.concatenate([boundaries - 1, [len(idx) - 1]])]
+    p = part_of[first]
+    ring = closed[p]
+    lengths[p[ring]] += np.hypot(*(xy[last[ring]] - xy[first[ring]]).T)
+    return lengths
+
+
+def infer_interval(elevations: NDArray[np.float64]) -> float | None:
+    """The contour interval: the most common step between consecutive distinct elevations.
+
+    >>> infer_interval(np.array([100.0, 120.0, 140.0, 140.0, 200.0]))
+    20.0
+    """
+    levels = np.unique(np.round(np.asarray(elevations, dtype=np.float64), 6))
+    if len(levels) < 2:
+        return None
+    steps = np.round(np.diff(levels), 6)
+    return float(Counter(steps.tolist()).most_common(1)[0][0])
+
+
+def write_geojson(
+    path: str | os.PathLike[str],
+    features: Iterable[tuple[Coords, bool, dict[str, Any]]],
+    *,
+    from_crs: str,
+    to_crs: str = WGS84,
+    decimals: int | None = None,
+) -> None:
+    """Write lines to a GeoJSON FeatureCollection of LineStrings.
+
+    Parameters
+    ----------
+    path
+        Output file; written to a temporary file first and renamed, so readers never see half a file.
+    features
+        ``(coords, closed, properties)``: (n, 2) coordinates in ``from_crs``, whether the line is a ring
+        (stored without its repeated vertex: the first vertex is written again at the end), and JSON-able
+        properties (numpy scalars are converted).
+    from_crs
+        CRS of the coordinates.
+    to_crs
+        Output CRS. EPSG:4326 follows RFC 7946 (longitude, latitude; no ``crs`` member); any other CRS
+        (EPSG:3857, the source CRS, ...) is named in a ``crs`` member, as GDAL reads it.
+    decimals
+        Decimal places of the output coordinates. By default 7 in degrees (about 1 cm) and 3 in metres
+        (1 mm), so a write/read round trip stays within 1 cm. RFC 7946 suggests 6 in degrees (about 10 cm).
+
+    Raises
+    ------
+    InvalidContour
+        A feature has fewer than 2 positions or coordinates that cannot be transformed.
+    ValueError
+        Coordinates are not of shape (n, 2).
+    """
+    target = parse_crs(to_crs)
+    rfc7946 = target.equals(pyproj.CRS(WGS84), ignore_axis_order=True)
+    if decimals is None:
+        decimals = 7 if target.is_geographic else 3
+
+    geometries: list[Coords] = []
+    props: list[dict[str, Any]] = []
+    for coords, closed, properties in features:
+        xy = as_coords(coords)
+        if closed and len(xy) > 0:
+            xy = np.vstack([xy, xy[:1]])
+        if len(xy) < 2:
+            raise InvalidContour(
+                f"feature {properties.get('id', len(props))!r}: a line needs 2 positions, got {len(xy)}"
+            )
+        geometries.append(xy)
+        props.append(dict(properties))
+
+    counts = np.array([len(g) for g in geometries], dtype=np.int64)
+    all_xy = np.vstack(geometries) if geometries else np.empty((0, 2))
+    out = make_transformer(from_crs, to_crs)(all_xy)
+    finite = np.isfinite(out).all(axis=1)
+    if not finite.all():
+        k = int(np.searchsorted(np.cumsum(counts), int(np.flatnonzero(~finite)[0]), side="right"))
+        raise InvalidContour(
+            f"feature {props[k].get('id', k)!r}: coordinates cannot be transformed to {to_crs}"
+        )
+    out = np.round(out, decimals)
+
+    header: dict[str, Any] = {"type": "FeatureCollection"}
+    if not rfc7946:
+        authority = target.to_authority(min_confidence=90)
+        crs_name = f"urn:ogc:def:crs:{authority[0]}::{authority[1]}" if authority else target.to_wkt()
+        header["crs"] = {"type": "name", "properties": {"name": crs_name}}
+    head = json.dumps(header)[:-1] + ', "features": [\n'
+
+    lines = []
+    start = 0
+    for count, properties in zip(counts.tolist(), props, strict=True):
+        feature = {
+            "type": "Feature",
+            "properties": properties,
+            "geometry": {"type": "LineString", "coordinates": out[start : start + count].tolist()},
+        }
+        lines.append(json.dumps(feature, separators=(",", ":"), default=_json_default, allow_nan=False))
+        start += count
+
+    path = Path(path)
+    # A uniquely named sibling, opened exclusively, then renamed over the target: readers never see half a
+    # file, and the file gets the usual permissions (tempfile.mkstemp would make it private to the owner).
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex}.tmp")
+    try:
+        with open(tmp, "x", encoding="utf-8") as fh:
+            fh.write(head)
+            fh.write(",\n".join(lines))
+            fh.write("\n]}\n")
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def _json_default(value: Any) -> Any:
+    """Make numpy scalars and arrays JSON-able."""
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.floating):
+        return float(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"property value {value!r} of type {type(value).__name__} is not JSON-serialisable")
