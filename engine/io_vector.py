@@ -14,7 +14,7 @@ from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 import pyproj
@@ -357,14 +357,14 @@ def assemble_contours(
     if candidate.any():
         lonlat[candidate], valid_vertex[candidate] = lonlat_validity(source_crs, xy[candidate])
     crs_label = _short_crs_name(source_crs)
-    for k in np.unique(part_of[candidate & ~valid_vertex]):
-        first_bad = int(np.flatnonzero((part_of == k) & ~valid_vertex)[0])
-        x, y = xy[first_bad]
+    for k in np.unique(part_of[candidate & ~valid_vertex]).tolist():
+        lo, hi = int(parts.offsets[k]), int(parts.offsets[k + 1])
+        x, y = xy[lo + int(np.argmin(valid_vertex[lo:hi]))]  # the part's first invalid vertex
         reasons.setdefault(int(k), f"coordinates out of range for {crs_label} ({x:.8g}, {y:.8g})")
     ok &= _all_per_part(valid_vertex | ~candidate, part_of, n_parts)
 
     if not ok.any():
-        _raise_nothing_usable(where, parts, reasons, bad)
+        _raise_nothing_usable(where, bad + _bad_from_reasons(parts, reasons, where))
 
     # 3. The working CRS from the extent of the usable parts, and one projection call for all their vertices.
     use = ok[part_of]
@@ -401,11 +401,10 @@ def assemble_contours(
             reasons[int(k)] = "closed ring with fewer than 3 distinct points"
         elif lengths[k] < tolerances.zero_length_m:
             reasons[int(k)] = f"zero length ({lengths[k]:.3g} m)"
-    for k in sorted(reasons):
-        bad.append(BadFeature(parts.ids[k], reasons[k], where))
+    bad.extend(_bad_from_reasons(parts, reasons, where))
     ok &= np.array([k not in reasons for k in range(n_parts)], dtype=bool)
     if not ok.any():
-        _raise_nothing_usable(where, parts, reasons, bad)
+        _raise_nothing_usable(where, bad)
 
     kept_xy = projected[keep]
     kept_offsets = np.concatenate([[0], np.cumsum(kept_counts)])
@@ -430,10 +429,12 @@ def assemble_contours(
     )
 
 
-def _raise_nothing_usable(
-    where: str, parts: LineParts, reasons: dict[int, str], bad: list[BadFeature]
-) -> None:
-    listed = bad + [BadFeature(parts.ids[k], r, where) for k, r in sorted(reasons.items())]
+def _bad_from_reasons(parts: LineParts, reasons: dict[int, str], where: str) -> list[BadFeature]:
+    """BadFeatures for the parts in ``reasons`` (part index -> reason), in part order."""
+    return [BadFeature(parts.ids[k], reason, where) for k, reason in sorted(reasons.items())]
+
+
+def _raise_nothing_usable(where: str, listed: list[BadFeature]) -> NoReturn:
     sample = "; ".join(f"{b.id}: {b.reason}" for b in listed[:5])
     more = f" (and {len(listed) - 5} more)" if len(listed) > 5 else ""
     raise SourceError(f"{where}: no usable contour among {len(listed)} features: {sample}{more}")
