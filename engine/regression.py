@@ -32,6 +32,8 @@ from engine.types import Contour
 
 #: Number of scales of a reference contour's DP ladder (paper Table 4 had four real maps).
 REFERENCE_SCALES = 12
+#: Reference contours per group whose DP ladders are averaged into the group's similarity-scale trend.
+REFERENCES_PER_GROUP = 8
 
 
 def exponential_model(x: NDArray[np.float64], a: float, b: float, c: float, d: float) -> NDArray[np.float64]:
@@ -154,31 +156,60 @@ def assign_groups(
     return labels.astype(np.intp), np.array(references, dtype=np.intp)
 
 
-def fit_group_model(reference: Contour, params: BuildParams) -> GroupModel:
-    """Fit eq. 14 to the reference contour's DP-at-scale similarities."""
-    scales = np.geomspace(params.source_scale, params.target_scale, REFERENCE_SCALES)
+def reference_sets(
+    contours: list[Contour], labels: NDArray[np.intp], references: NDArray[np.intp], per_group: int
+) -> list[list[Contour]]:
+    """Up to ``per_group`` members of each group nearest its reference contour in size and shape."""
+    feats = group_features(contours)
+    scaled = (feats - feats.mean(axis=0)) / np.maximum(feats.std(axis=0), 1e-12)
+    sets: list[list[Contour]] = []
+    for g, ref in enumerate(references):
+        if ref < 0:
+            sets.append([])
+            continue
+        members = np.flatnonzero(labels == g)
+        dist = np.sum((scaled[members] - scaled[ref]) ** 2, axis=1)
+        nearest = members[np.argsort(dist, kind="stable")[:per_group]]
+        sets.append([contours[int(i)] for i in nearest])
+    return sets
+
+
+def reference_similarities(reference: Contour, scales: NDArray[np.float64], params: BuildParams) -> NDArray[np.float64]:
+    """Sim(L0, DP(L0, 0.1 mm x S)) of one reference contour at each scale S."""
     probe = SimilarityReference.of(reference.coords, reference.closed, params.similarity_spacing_m)
     sims = []
     for s in scales:
         keep = douglas_peucker(reference.coords, tolerance_for_scale(s), reference.closed)
         sims.append(probe.similarity(reference.coords[keep]))
+    return np.array(sims)
+
+
+def fit_group_model(references: list[Contour], params: BuildParams) -> GroupModel:
+    """Fit eq. 14 to the mean DP-at-scale similarities of a group's reference contours.
+
+    One contour's DP ladder is a staircase (DP drops vertices in steps); the mean over a few references near
+    the group's centre is the smooth trend the paper read off real maps at several scales.
+    """
+    scales = np.geomspace(params.source_scale, params.target_scale, REFERENCE_SCALES)
+    sims = np.mean([reference_similarities(r, scales, params) for r in references], axis=0)
     y = np.minimum.accumulate(np.array(sims))
     x = scales / params.source_scale
     coefficients = None
     if y[0] - y[-1] > 1e-9:
         span = x[-1] - x[0]
-        p0 = (float(y[-1]), 0.0, float(y[0] - y[-1]), -3.0 / span)
+        p0 = (float(y[-1]), -1e-3, float(y[0] - y[-1]), -3.0 / span)
+        # a, c >= 0 and b, d <= 0 make f non-increasing, so every fit can be inverted.
+        bounds = ([0.0, -50.0, 0.0, -50.0], [10.0, 0.0, 10.0, 0.0])
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", OptimizeWarning)
-                popt, _ = curve_fit(exponential_model, x, y, p0=p0, maxfev=20000)
+                popt, _ = curve_fit(exponential_model, x, y, p0=p0, bounds=bounds, maxfev=20000)
             fitted = exponential_model(np.linspace(x[0], x[-1], 200), *popt)
-            # Only a fit that falls monotonically over the range can be inverted.
-            if np.all(np.isfinite(fitted)) and np.all(np.diff(fitted) <= 1e-12) and fitted[0] > fitted[-1]:
+            if np.all(np.isfinite(fitted)) and fitted[0] - fitted[-1] > 1e-9:
                 coefficients = tuple(float(v) for v in popt)
         except (RuntimeError, ValueError):
             coefficients = None
-    return GroupModel(coefficients=coefficients, reference_id=reference.id, scales=scales, similarities=y)  # type: ignore[arg-type]
+    return GroupModel(coefficients=coefficients, reference_id=references[0].id, scales=scales, similarities=y)  # type: ignore[arg-type]
 
 
 def fit_scale_model(contours: list[Contour], params: BuildParams) -> tuple[ScaleModel, NDArray[np.intp]]:
@@ -196,9 +227,9 @@ def fit_scale_model(contours: list[Contour], params: BuildParams) -> tuple[Scale
         )
     labels, references = assign_groups(contours, params.groups)
     groups = []
-    for ref in references:
-        if ref < 0:
+    for members in reference_sets(contours, labels, references, REFERENCES_PER_GROUP):
+        if not members:
             groups.append(GroupModel(None, None, np.zeros(0), np.zeros(0)))
         else:
-            groups.append(fit_group_model(contours[int(ref)], params))
+            groups.append(fit_group_model(members, params))
     return ScaleModel(params.source_scale, params.target_scale, ladder, tuple(groups)), labels
