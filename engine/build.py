@@ -44,6 +44,8 @@ class BuiltSet:
         CRS of the surfaces' coordinates (metres) and of the input.
     bad_features
         Input features left out by the reader or the build, each with its reason.
+    repaired
+        Contours rebuilt with a finer target so that their slices cross no other contour.
     """
 
     surfaces: list[CCS]
@@ -54,6 +56,7 @@ class BuiltSet:
     bad_features: list[BadFeature] = field(default_factory=list)
     name: str = "contours"
     interval: float | None = None
+    repaired: int = 0
 
 
 def vanish_scale(ccs: CCS, model: ScaleModel) -> float:
@@ -75,12 +78,17 @@ def vanish_scale(ccs: CCS, model: ScaleModel) -> float:
 
 
 def _build_chunk(
-    contours: Sequence[Contour], labels: Sequence[int], params: BuildParams, model: ScaleModel
+    contours: Sequence[Contour],
+    labels: Sequence[int],
+    params: BuildParams,
+    model: ScaleModel,
+    factors: Sequence[float] | None = None,
 ) -> list[CCS | BadFeature]:
     out: list[CCS | BadFeature] = []
-    for contour, group in zip(contours, labels, strict=True):
+    factors = factors if factors is not None else [1.0] * len(contours)
+    for contour, group, factor in zip(contours, labels, factors, strict=True):
         try:
-            ccs = build_ccs(contour, params)
+            ccs = build_ccs(contour, params, factor)
         except CCSMError as exc:
             out.append(BadFeature(contour.id, str(exc)))
             continue
@@ -156,7 +164,12 @@ def build_contour_set(
                 done += len(chunk)
                 if progress:
                     progress(done, total)
-    surfaces = [r for r in results if isinstance(r, CCS)]
+    built_pairs = [(c, r) for c, r in zip(contours, results, strict=True) if isinstance(r, CCS)]
+    repaired = 0
+    if params.resolve_crossings and params.target_mode == "scale" and built_pairs:
+        with threadpool_limits(1):
+            repaired = resolve_crossings(built_pairs, labels_of(contours, labels, built_pairs), params, model)
+    surfaces = [r for _, r in built_pairs]
     bad = list(contour_set.bad_features) + [r for r in results if isinstance(r, BadFeature)]
     return BuiltSet(
         surfaces=surfaces,
@@ -167,7 +180,84 @@ def build_contour_set(
         bad_features=bad,
         name=contour_set.name,
         interval=contour_set.interval,
+        repaired=repaired,
     )
+
+
+#: Rounds of crossing repair; each halves the target tolerance of the contours involved, the last keeps L0.
+REPAIR_FACTORS = (0.5, 0.25, 0.125, 0.0)
+#: Every how many ladder scales the slices are checked for crossings.
+CHECK_EVERY = 4
+
+
+def labels_of(contours: Sequence[Contour], labels: np.ndarray, pairs: Sequence[tuple[Contour, CCS]]) -> list[int]:
+    """Group label of each built contour."""
+    index = {id(c): i for i, c in enumerate(contours)}
+    return [int(labels[index[id(c)]]) for c, _ in pairs]
+
+
+def slices_at_ladder(surfaces: Sequence[CCS], k: int) -> list[np.ndarray]:
+    """Every surface sliced at its own t for ladder scale ``k``."""
+    return [s.at(float(s.t_at_scale[k])) for s in surfaces]
+
+
+def find_new_crossings(
+    surfaces: Sequence[CCS], model: ScaleModel, allowed: set[tuple[int, int]], only: set[int] | None = None
+) -> set[int]:
+    """Indices of surfaces whose slice crosses another visible slice at a checked scale, beyond ``allowed``.
+
+    ``only`` restricts the search to crossings that involve these surfaces (the ones just rebuilt).
+    """
+    from engine.topology import crossing_pairs
+
+    involved: set[int] = set()
+    ladder_steps = list(range(CHECK_EVERY, len(model.ladder), CHECK_EVERY))
+    if ladder_steps[-1:] != [len(model.ladder) - 1]:
+        ladder_steps.append(len(model.ladder) - 1)
+    vanish = np.array([s.vanish_scale for s in surfaces])
+    for k in ladder_steps:
+        scale = float(model.ladder[k])
+        visible = np.flatnonzero(vanish > scale)
+        local_only = None if only is None else {int(j) for j in np.flatnonzero(np.isin(visible, list(only)))}
+        if local_only is not None and not local_only:
+            continue
+        pairs = crossing_pairs(slices_at_ladder([surfaces[i] for i in visible], k), local_only)
+        for a, b in pairs:
+            pair = (int(visible[a]), int(visible[b]))
+            if pair not in allowed:
+                involved.update(pair)
+    return involved
+
+
+def resolve_crossings(
+    pairs: list[tuple[Contour, CCS]], labels: Sequence[int], params: BuildParams, model: ScaleModel
+) -> int:
+    """Rebuild, with finer targets, the contours whose slices cross a neighbour; returns how many changed.
+
+    Pairs of contours that already touch in the input are left alone: generalization cannot separate
+    them and must not be blamed for them.
+    """
+    from engine.topology import crossing_pairs
+
+    allowed = crossing_pairs([s.at(0.0) for _, s in pairs])
+    changed: set[int] = set()
+    involved = find_new_crossings([s for _, s in pairs], model, allowed)
+    for factor in REPAIR_FACTORS:
+        if not involved:
+            break
+        rebuilt_now: set[int] = set()
+        for i in sorted(involved):
+            contour, old = pairs[i]
+            if old.tolerance_factor <= factor:
+                continue
+            rebuilt = _build_chunk([contour], [labels[i]], params, model, [factor])[0]
+            if isinstance(rebuilt, CCS):
+                pairs[i] = (contour, rebuilt)
+                changed.add(i)
+                rebuilt_now.add(i)
+        # Only the rebuilt contours can have made new crossings (or still have old ones).
+        involved = find_new_crossings([s for _, s in pairs], model, allowed, rebuilt_now) if rebuilt_now else set()
+    return len(changed)
 
 
 def t_for_scale_all(built: BuiltSet, scale: float) -> np.ndarray:

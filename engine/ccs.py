@@ -49,6 +49,9 @@ class CCS:
         (S,) t at each scale of the dataset's scale ladder (filled by the build).
     vanish_scale
         Scale denominator from which the contour is too small to show (inf: never).
+    tolerance_factor
+        Share of the target scale's DP tolerance the target was made with (below 1 where the build had to
+        keep more detail so this contour's slices cannot cross a neighbour's).
     """
 
     contour_id: FeatureId
@@ -64,6 +67,7 @@ class CCS:
     group: int = 0
     t_at_scale: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     vanish_scale: float = float("inf")
+    tolerance_factor: float = 1.0
 
     def at(self, t: float) -> Coords:
         """The simplified contour at ``t`` in [0, 1]: (M, 2) metres (a ring as a closed path)."""
@@ -97,10 +101,16 @@ class SurfaceParts:
     surface: CCSurface
 
 
-def target_indices(coords: Coords, closed: bool, params: BuildParams) -> NDArray[np.intp]:
-    """Characteristic points of a contour: the vertices its target contour Ln keeps."""
+def target_indices(
+    coords: Coords, closed: bool, params: BuildParams, tolerance_factor: float = 1.0
+) -> NDArray[np.intp]:
+    """Characteristic points of a contour: the vertices its target contour Ln keeps.
+
+    ``tolerance_factor`` scales the target's DP tolerance; the build lowers it for contours whose slices
+    would cross a neighbour (0 keeps every vertex: Ln = L0).
+    """
     if params.target_mode == "scale":
-        return douglas_peucker(coords, params.target_tolerance_m, closed)
+        return douglas_peucker(coords, params.target_tolerance_m * tolerance_factor, closed)
     if params.target_mode == "points":
         return douglas_peucker_count(coords, int(params.target_points or 2), closed)
     return douglas_peucker_count(coords, 3 if closed else 2, closed)
@@ -125,11 +135,11 @@ def check_contour(contour: Contour) -> None:
         raise InvalidContour(f"{where}: zero length")
 
 
-def build_surface(contour: Contour, params: BuildParams) -> SurfaceParts:
+def build_surface(contour: Contour, params: BuildParams, tolerance_factor: float = 1.0) -> SurfaceParts:
     """Steps 1-5 of CCSM for one contour: target, correspondence, surface."""
     check_contour(contour)
     xy = contour.coords
-    keep = target_indices(xy, contour.closed, params)
+    keep = target_indices(xy, contour.closed, params, tolerance_factor)
     if contour.closed:
         # Start the ring at a characteristic point so the seam is one of the fixed correspondences.
         xy = np.roll(xy, -int(keep[0]), axis=0)
@@ -145,7 +155,7 @@ def build_surface(contour: Contour, params: BuildParams) -> SurfaceParts:
     )
 
 
-def build_ccs(contour: Contour, params: BuildParams) -> CCS:
+def build_ccs(contour: Contour, params: BuildParams, tolerance_factor: float = 1.0) -> CCS:
     """Build the CCS of one contour and its Sim(t) table (the scale table is added by the build).
 
     Raises
@@ -155,7 +165,7 @@ def build_ccs(contour: Contour, params: BuildParams) -> CCS:
     SurfaceFitError
         The surface could not be fitted.
     """
-    parts = build_surface(contour, params)
+    parts = build_surface(contour, params, tolerance_factor)
     u = tessellation_parameters(parts.surface.params, params.tessellation_per_span)
     base = parts.surface.base(u)
     top = parts.surface.top(u)
@@ -177,6 +187,7 @@ def build_ccs(contour: Contour, params: BuildParams) -> CCS:
         length_m=path_length(contour.coords, contour.closed),
         n_input_vertices=contour.n_vertices,
         target_vertices=len(parts.characteristic) - (1 if contour.closed else 0),
+        tolerance_factor=tolerance_factor,
     )
 
 

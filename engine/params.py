@@ -29,8 +29,9 @@ class BuildParams:
     target_points
         Vertex count for ``target_mode="points"``.
     resample_spacing_m
-        Largest gap between correspondence samples on L0, metres; None = 0.5 mm at the source scale (25 m at
-        1:50,000), fine enough that the surface cannot stray visibly from L0 between samples.
+        Largest gap between correspondence samples on L0, metres; None = 1 mm at the source scale (50 m at
+        1:50,000). L0's own vertices are always samples; this only decides how finely long edges are split, i.e.
+        how smoothly a long straight piece of Ln bends back into L0's detail (1 mm on the map at most).
     tessellation_per_span
         Extra u samples between two data parameters when the CCS is tessellated into the CCS-mesh (the
         paper's mesh parameter). 0, the default, tessellates at the paper's parameter grid [u_i, v_j] (eq. 5):
@@ -46,6 +47,10 @@ class BuildParams:
         Number of contour groups (by size and shape) that each get their own similarity-scale regression.
     scale_mapping
         ``"regression"`` (the paper's exponential regression per group) or ``"log"`` (t linear in log scale).
+    resolve_crossings
+        With ``target_mode="scale"``: check the slices of all contours for crossings at a ladder of scales
+        and rebuild the contours involved with a finer target (half the tolerance, up to four times, then
+        Ln = L0), so that no two contours cross where the input's did not (DESIGN.md section 5).
     """
 
     source_scale: float = 50_000.0
@@ -59,6 +64,7 @@ class BuildParams:
     scale_levels: int = 33
     groups: int = 5
     scale_mapping: Literal["regression", "log"] = "regression"
+    resolve_crossings: bool = True
     tolerances: Tolerances = field(default=DEFAULT_TOLERANCES)
 
     def __post_init__(self) -> None:
@@ -89,7 +95,7 @@ class BuildParams:
         """Correspondence sample spacing in metres."""
         if self.resample_spacing_m is not None:
             return self.resample_spacing_m
-        return 5 * tolerance_for_scale(self.source_scale)
+        return 10 * tolerance_for_scale(self.source_scale)
 
     @property
     def target_tolerance_m(self) -> float:
