@@ -1,0 +1,500 @@
+// ccsm web page: wires the controls, the maps and the morphing contour layers together.
+
+import * as maplibregl from 'maplibre-gl';
+import {getJSON, formatDetail} from './api.js';
+import {installProtocol, onTileActivity} from './protocol.js';
+import {MorphingContours} from './morph.js';
+import {formatScale, quantiseZoom, scaleDenominator} from './scale.js';
+import {installDropZone, uploadDataset} from './upload.js';
+
+const METHOD_NAMES = {
+  ccsm: 'CCSM',
+  dp: 'Douglas–Peucker',
+  wm: 'Wang–Müller',
+  vw: 'Visvalingam–Whyatt',
+  original: 'Original',
+};
+const COLOR_MAIN = '#8a4b1c';
+const COLOR_COMPARE = '#1b63c6';
+
+const $ = (id) => document.getElementById(id);
+const params = new URLSearchParams(window.location.search);
+// Captured before MapLibre writes the camera into the hash: a shared link keeps its view.
+const initialHashHasCamera = /(^#|&)map=/.test(window.location.hash);
+
+const state = {
+  datasetId: null,
+  dataset: null,
+  tilejson: null,
+  method: params.get('method') ?? 'ccsm',
+  compare: params.get('compare') ?? 'dp',
+  view: params.get('view') ?? 'single',
+  t: params.has('t') ? Number(params.get('t')) : null,
+};
+const errors = [];
+
+// ---------------------------------------------------------------- messages
+
+function showMessage(text, kind = 'error', {timeoutMs = 0} = {}) {
+  const box = document.createElement('div');
+  box.className = `message ${kind}`;
+  const p = document.createElement('p');
+  p.textContent = text;
+  const close = document.createElement('button');
+  close.type = 'button';
+  close.setAttribute('aria-label', 'Dismiss');
+  close.textContent = '×';
+  close.onclick = () => box.remove();
+  box.append(p, close);
+  $('messages').append(box);
+  if (kind === 'error') errors.push(text);
+  if (timeoutMs) setTimeout(() => box.remove(), timeoutMs);
+  return box;
+}
+
+function showError(err) {
+  const text = typeof err === 'string' ? err : err?.message ?? formatDetail(err);
+  // Repeated tile errors would flood the corner: show each text once at a time.
+  for (const m of $('messages').querySelectorAll('.message.error p')) if (m.textContent === text) return;
+  showMessage(text, 'error');
+}
+
+// ---------------------------------------------------------------- base style (offline: no glyphs, no sprites)
+
+function baseStyle() {
+  return {
+    version: 8,
+    // No cross-fades: a swapped-in buffer must appear in the same frame the old one goes.
+    transition: {duration: 0, delay: 0},
+    sources: {extent: {type: 'geojson', data: {type: 'FeatureCollection', features: []}}},
+    layers: [
+      {id: 'background', type: 'background', paint: {'background-color': '#f4f1ea'}},
+      {id: 'extent-fill', type: 'fill', source: 'extent', paint: {'fill-color': '#ffffff', 'fill-opacity': 0.55}},
+      {
+        id: 'extent-line',
+        type: 'line',
+        source: 'extent',
+        paint: {'line-color': '#a09a8e', 'line-width': 1, 'line-dasharray': [3, 2]},
+      },
+      // Empty anchors: contour layers go below them, so the compared method draws over the main one.
+      {id: 'anchor-main', type: 'background', layout: {visibility: 'none'}},
+      {id: 'anchor-compare', type: 'background', layout: {visibility: 'none'}},
+    ],
+  };
+}
+
+function createMap(container) {
+  return new maplibregl.Map({
+    container,
+    style: baseStyle(),
+    center: [0, 0],
+    zoom: 1,
+    hash: container === 'map-a' ? 'map' : false,
+    attributionControl: {compact: true},
+    fadeDuration: 0,
+    maxPitch: 0,
+    dragRotate: false,
+    // Playwright screenshots read the composited page, so preserveDrawingBuffer is not needed.
+  });
+}
+
+// ---------------------------------------------------------------- maps and layers
+
+let mapA;
+let mapB = null;
+let mainLayer;
+let overlayLayer;
+let splitLayer = null;
+let syncing = false;
+
+function whenStyleLoaded(map) {
+  return map.isStyleLoaded() ? Promise.resolve() : new Promise((resolve) => map.once('load', resolve));
+}
+
+function layerCallbacks() {
+  return {onChange: () => scheduleReadout(), onError: (msg) => showError(msg)};
+}
+
+function ensureMapB() {
+  if (mapB) return mapB;
+  mapB = createMap('map-b');
+  splitLayer = new MorphingContours(mapB, {color: COLOR_MAIN, beforeId: 'anchor-main', ...layerCallbacks()});
+  wireMap(mapB);
+  const sync = (from, to) => () => {
+    if (syncing || !to) return;
+    syncing = true;
+    to.jumpTo({center: from.getCenter(), zoom: from.getZoom(), bearing: from.getBearing(), pitch: from.getPitch()});
+    syncing = false;
+  };
+  mapA.on('move', sync(mapA, mapB));
+  mapB.on('move', sync(mapB, mapA));
+  mapB.on('load', () => {
+    mapB.jumpTo({center: mapA.getCenter(), zoom: mapA.getZoom()});
+    applyView();
+  });
+  return mapB;
+}
+
+function wireMap(map) {
+  map.on('move', scheduleReadout);
+  map.on('mousemove', (e) => hover(map, e));
+  map.on('mouseout', () => ($('tooltip').hidden = true));
+  map.on('error', (e) => {
+    // Tile errors of our sources are reported by MorphingContours; anything else is shown here.
+    if (e.sourceId && /^m\d+-src-/.test(e.sourceId)) return;
+    const message = e.error?.message ?? String(e.error ?? 'map error');
+    if (!/abort/i.test(message)) showError(`Map: ${message}`);
+  });
+}
+
+function setExtent(map, bounds) {
+  const src = map.getSource('extent');
+  if (!src) return;
+  if (!bounds) {
+    src.setData({type: 'FeatureCollection', features: []});
+    return;
+  }
+  const [w, s, e, n] = bounds;
+  src.setData({
+    type: 'Feature',
+    properties: {},
+    geometry: {type: 'Polygon', coordinates: [[[w, s], [e, s], [e, n], [w, n], [w, s]]]},
+  });
+}
+
+/** Apply view, methods and t to every layer set. */
+function applyView() {
+  const tj = state.tilejson;
+  const maps = $('maps');
+  maps.classList.remove('single', 'split', 'overlay');
+  maps.classList.add(state.view);
+  $('compare-field').classList.toggle('hidden-field', state.view === 'single');
+  $('label-a').textContent = METHOD_NAMES[state.method];
+  $('label-b').textContent = METHOD_NAMES[state.compare];
+
+  mainLayer.setOptions({method: state.method, t: state.t});
+  if (mainLayer.tilejson !== tj) mainLayer.setDataset(tj);
+
+  const overlayOn = state.view === 'overlay' && tj;
+  overlayLayer.setOptions({method: state.compare, t: state.t});
+  if (overlayLayer.tilejson !== (overlayOn ? tj : null)) overlayLayer.setDataset(overlayOn ? tj : null);
+
+  const splitOn = state.view === 'split';
+  const paneWasHidden = $('pane-b').hidden;
+  $('pane-b').hidden = !splitOn;
+  if (splitOn) ensureMapB();
+  mapA.resize();
+  if (mapB) {
+    if (splitOn && paneWasHidden) mapB.jumpTo({center: mapA.getCenter(), zoom: mapA.getZoom()});
+    mapB.resize();
+    if (mapB.isStyleLoaded()) {
+      setExtent(mapB, tj?.bounds);
+      splitLayer.setOptions({method: state.compare, t: state.t});
+      const want = splitOn && tj ? tj : null;
+      if (splitLayer.tilejson !== want) splitLayer.setDataset(want);
+    }
+  }
+  renderLegend();
+  scheduleReadout();
+}
+
+function renderLegend() {
+  const legend = $('legend');
+  if (!state.tilejson) {
+    legend.hidden = true;
+    return;
+  }
+  legend.hidden = false;
+  const rows = [[COLOR_MAIN, METHOD_NAMES[state.method], false]];
+  if (state.view === 'overlay') rows.push([COLOR_COMPARE, METHOD_NAMES[state.compare], true]);
+  legend.replaceChildren(
+    ...rows.map(([color, name, dashed]) => {
+      const div = document.createElement('div');
+      const sw = document.createElement('span');
+      sw.className = `swatch${dashed ? ' dashed' : ''}`;
+      sw.style.borderTopColor = color;
+      div.append(sw, name);
+      return div;
+    }),
+  );
+}
+
+// ---------------------------------------------------------------- readout and hover
+
+let readoutQueued = false;
+let tStatsTimer = null;
+let lastTStats = null;
+
+function scheduleReadout() {
+  if (readoutQueued) return;
+  readoutQueued = true;
+  requestAnimationFrame(() => {
+    readoutQueued = false;
+    updateReadout();
+  });
+  clearTimeout(tStatsTimer);
+  tStatsTimer = setTimeout(() => {
+    lastTStats = mainLayer?.visibleTStats() ?? null;
+    updateReadout();
+  }, 150);
+}
+
+function fmtT(t) {
+  return Number(t).toFixed(3);
+}
+
+function updateReadout() {
+  if (!mapA) return;
+  const zoom = mapA.getZoom();
+  const lat = mapA.getCenter().lat;
+  $('readout-scale').textContent = formatScale(scaleDenominator(zoom, lat));
+  const s = mainLayer?.state();
+  const q = s?.activeQ;
+  $('readout-zoom').textContent = `zoom ${zoom.toFixed(2)}` + (q != null ? ` · morph ${q.toFixed(3)}` : '');
+  let t = 't –';
+  if (state.t != null) t = `t = ${fmtT(state.t)} (pinned)`;
+  else if (state.method === 'original') t = 't = 0 (original)';
+  else if (lastTStats) {
+    t = `t ≈ ${fmtT(lastTStats.median)}`;
+    if (lastTStats.max - lastTStats.min > 0.0005) t += ` (${fmtT(lastTStats.min)}–${fmtT(lastTStats.max)})`;
+  }
+  $('readout-t').textContent = t;
+}
+
+function hover(map, e) {
+  const layers = [mainLayer, overlayLayer, splitLayer].filter((l) => l && l.map === map);
+  const ids = layers.flatMap((l) => l.visibleLayerIds);
+  const tip = $('tooltip');
+  if (!ids.length) {
+    tip.hidden = true;
+    return;
+  }
+  const {x, y} = e.point;
+  const features = map.queryRenderedFeatures([[x - 4, y - 4], [x + 4, y + 4]], {layers: ids});
+  if (!features.length) {
+    tip.hidden = true;
+    map.getCanvas().style.cursor = '';
+    return;
+  }
+  const f = features[0];
+  const owner = layers.find((l) => l.visibleLayerIds.includes(f.layer.id));
+  const p = f.properties ?? {};
+  const elev = Number(p.elevation);
+  const elevText = Number.isFinite(elev) ? `${Number.isInteger(elev) ? elev : elev.toFixed(1)} m` : '? m';
+  const tVal = Number(p.t);
+  const tText = Number.isFinite(tVal) ? `t = ${fmtT(tVal)}` : 't –';
+  tip.textContent = `${elevText}${p.index ? ' (index)' : ''} · ${tText} · ${METHOD_NAMES[owner?.method] ?? ''}`;
+  tip.style.left = `${e.originalEvent.clientX + 12}px`;
+  tip.style.top = `${e.originalEvent.clientY + 12}px`;
+  tip.hidden = false;
+  map.getCanvas().style.cursor = 'crosshair';
+}
+
+// ---------------------------------------------------------------- datasets
+
+function tilejsonUrl(ds) {
+  return ds.tilejson ?? ds.tilejson_url ?? ds.links?.tilejson ?? `/tiles/${encodeURIComponent(ds.id)}/tilejson.json`;
+}
+
+let datasetList = [];
+let listPoll = null;
+
+async function refreshDatasets() {
+  datasetList = await getJSON('/datasets', 'Listing datasets');
+  const select = $('dataset');
+  select.replaceChildren(
+    ...datasetList.map((ds) => {
+      const opt = document.createElement('option');
+      opt.value = ds.id;
+      let label = ds.name ?? ds.id;
+      if (ds.state === 'building') label += ' (building…)';
+      if (ds.state === 'failed') label += ' (failed)';
+      opt.textContent = label;
+      opt.disabled = ds.state !== 'ready';
+      return opt;
+    }),
+  );
+  if (state.datasetId) select.value = state.datasetId;
+  // Keep the list fresh while something builds (an upload from another tab, the sample at start-up).
+  clearTimeout(listPoll);
+  if (datasetList.some((d) => d.state === 'building')) {
+    listPoll = setTimeout(() => refreshDatasets().then(pickInitialDataset).catch(showError), 1500);
+  }
+  return datasetList;
+}
+
+function pickInitialDataset() {
+  if (state.datasetId) return;
+  const wanted = params.get('dataset');
+  const ds =
+    datasetList.find((d) => d.id === wanted && d.state === 'ready') ?? datasetList.find((d) => d.state === 'ready');
+  if (ds) selectDataset(ds.id, {fit: !initialHashHasCamera}).catch(showError);
+}
+
+async function selectDataset(id, {fit = true} = {}) {
+  const listed = datasetList.find((d) => d.id === id) ?? {id};
+  const [ds, tj] = await Promise.all([
+    getJSON(`/datasets/${encodeURIComponent(id)}`, `Dataset “${listed.name ?? id}”`),
+    getJSON(tilejsonUrl(listed), `TileJSON of “${listed.name ?? id}”`),
+  ]);
+  if (!Array.isArray(tj.tiles) || !tj.tiles.length) throw new Error(`TileJSON of “${id}” lists no tiles URL`);
+  state.datasetId = id;
+  state.dataset = ds;
+  state.tilejson = tj;
+  $('dataset').value = id;
+  await whenStyleLoaded(mapA);
+  setExtent(mapA, tj.bounds);
+  if (fit) {
+    if (tj.bounds) mapA.fitBounds(tj.bounds, {padding: 30, animate: false});
+    else if (tj.center) mapA.jumpTo({center: [tj.center[0], tj.center[1]], zoom: tj.center[2] ?? 10});
+  }
+  applyView();
+}
+
+async function handleFile(file) {
+  const bar = $('upload-bar');
+  const label = $('upload-label');
+  $('upload-progress').hidden = false;
+  label.textContent = `Uploading ${file.name}…`;
+  bar.removeAttribute('value');
+  try {
+    const ds = await uploadDataset(file, {
+      onProgress: (d, fraction) => {
+        label.textContent = `Building ${d.name ?? file.name}: ${fraction == null ? '…' : `${Math.round(fraction * 100)} %`}`;
+        if (fraction == null) bar.removeAttribute('value');
+        else bar.value = fraction;
+      },
+    });
+    label.textContent = `${ds.name ?? file.name} is ready`;
+    bar.value = 1;
+    await refreshDatasets();
+    await selectDataset(ds.id, {fit: true});
+    showMessage(`Dataset “${ds.name ?? file.name}” is ready.`, 'info', {timeoutMs: 4000});
+    setTimeout(() => ($('upload-progress').hidden = true), 1500);
+  } catch (err) {
+    $('upload-progress').hidden = true;
+    showError(err);
+  }
+}
+
+// ---------------------------------------------------------------- controls
+
+function wireControls() {
+  $('method').value = state.method;
+  $('compare').value = state.compare;
+  $('view').value = state.view;
+  $('method').onchange = (e) => {
+    state.method = e.target.value;
+    applyView();
+  };
+  $('compare').onchange = (e) => {
+    state.compare = e.target.value;
+    applyView();
+  };
+  $('view').onchange = (e) => {
+    state.view = e.target.value;
+    applyView();
+  };
+  $('dataset').onchange = (e) => selectDataset(e.target.value).catch(showError);
+  const pin = $('t-pin');
+  const slider = $('t-slider');
+  const out = $('t-value');
+  const applyT = () => {
+    state.t = pin.checked ? Number(slider.value) : null;
+    slider.disabled = !pin.checked;
+    out.textContent = pin.checked ? Number(slider.value).toFixed(2) : 'auto';
+    applyView();
+  };
+  if (state.t != null) {
+    pin.checked = true;
+    slider.value = String(state.t);
+  }
+  pin.onchange = applyT;
+  slider.oninput = applyT;
+  applyT();
+  $('upload-button').onclick = () => $('upload-input').click();
+  $('upload-input').onchange = (e) => {
+    const file = e.target.files?.[0];
+    e.target.value = '';
+    if (file) handleFile(file);
+  };
+  installDropZone($('dropzone'), handleFile);
+  onTileActivity((n) => ($('readout-net').textContent = n ? `loading ${n} tile${n > 1 ? 's' : ''}` : ''));
+}
+
+// ---------------------------------------------------------------- test and console hooks
+
+function layersInUse() {
+  return [mainLayer, overlayLayer, splitLayer].filter((l) => l && l.tilejson);
+}
+
+window.ccsm = {
+  maplibregl,
+  state,
+  errors,
+  get maps() {
+    return {a: mapA, b: mapB};
+  },
+  get layers() {
+    return {main: mainLayer, overlay: overlayLayer, split: splitLayer};
+  },
+  quantiseZoom,
+  selectDataset: (id, opts) => selectDataset(id, opts),
+  refreshDatasets: () => refreshDatasets(),
+  /** Fix the morph zoom of every layer (null follows the map again). */
+  setMorphOverride(q) {
+    for (const l of [mainLayer, overlayLayer, splitLayer]) l?.setOverride(q);
+  },
+  /** True when every layer in use shows what the camera and controls ask for and all its tiles are in. */
+  settled() {
+    const used = layersInUse();
+    if (!state.tilejson || !used.length) return false;
+    return used.every((l) => {
+      if (!l.settled || l.map.isMoving()) return false;
+      try {
+        return l.map.isSourceLoaded(l.active.sourceId);
+      } catch {
+        return false;
+      }
+    });
+  },
+  layerStates: () => layersInUse().map((l) => l.state()),
+};
+
+// ---------------------------------------------------------------- start
+
+async function start() {
+  installProtocol();
+  try {
+    mapA = createMap('map-a');
+  } catch (err) {
+    // Without WebGL2 MapLibre throws here ("WebGL2 is required ...") and would never fire load/idle.
+    const boot = $('boot');
+    boot.textContent = `This map needs WebGL2, which this browser does not provide: ${err?.message ?? err}`;
+    boot.classList.add('failed');
+    showError(boot.textContent);
+    window.ccsm.failed = boot.textContent;
+    return;
+  }
+  mainLayer = new MorphingContours(mapA, {color: COLOR_MAIN, beforeId: 'anchor-main', ...layerCallbacks()});
+  overlayLayer = new MorphingContours(mapA, {
+    color: COLOR_COMPARE,
+    beforeId: 'anchor-compare',
+    dasharray: [3, 2],
+    ...layerCallbacks(),
+  });
+  wireMap(mapA);
+  mapA.addControl(new maplibregl.NavigationControl({showCompass: false}), 'top-left');
+  wireControls();
+  await whenStyleLoaded(mapA);
+  $('boot').remove();
+  await refreshDatasets();
+  if (!datasetList.length) showMessage('No datasets yet: drop a GeoJSON contour file on the map.', 'info');
+  else if (!datasetList.some((d) => d.state === 'ready')) showMessage('The dataset is still being built…', 'info', {timeoutMs: 5000});
+  pickInitialDataset();
+}
+
+window.ccsm.ready = start().catch((err) => {
+  showError(err);
+  window.ccsm.failed = err?.message ?? String(err);
+});

@@ -1,0 +1,249 @@
+// Continuous morphing by double-buffered vector sources.
+//
+// The map zoom is quantised to eighths, q = floor(zoom * 8) / 8. Each q (with the method and the pinned t) is
+// one MapLibre vector source whose tiles ask the service for `zoom=q`. When q changes we never call setTiles on
+// the visible source (that blanks it): a new "pending" source is added with its layers at opacity 0, and once
+// all its tiles in view have arrived the layers are switched to full opacity and the old source is removed in
+// the same frame. So the old geometry stays on screen until the new geometry is ready.
+//
+// Overtaken loads: if q moves on while a pending source is still loading, the pending source is removed, which
+// makes MapLibre abort its tile requests (our protocol's AbortController). A pending load that has been running
+// for MIN_PROGRESS_MS is allowed to finish first, so a long continuous gesture still shows intermediate shapes
+// instead of waiting for the gesture to end.
+
+import {quantiseZoom, STEPS_PER_ZOOM} from './scale.js';
+import {registerSource, unregisterSource} from './protocol.js';
+
+export const MIN_PROGRESS_MS = 150;
+const SOURCE_LAYER = 'contours';
+
+let instanceCounter = 0;
+
+/** Median and range of the `t` field over features. */
+export function tStats(features) {
+  const ts = features.map((f) => Number(f.properties?.t)).filter(Number.isFinite).sort((a, b) => a - b);
+  if (!ts.length) return null;
+  return {min: ts[0], max: ts[ts.length - 1], median: ts[Math.floor(ts.length / 2)], count: ts.length};
+}
+
+export class MorphingContours {
+  /**
+   * @param {import('maplibre-gl').Map} map
+   * @param {object} options  color, beforeId (anchor layer), label (for the tooltip), onChange(state), onError(msg)
+   */
+  constructor(map, {color = '#8a4b1c', beforeId = undefined, label = '', dasharray = null, onChange, onError} = {}) {
+    this.map = map;
+    this.id = `m${++instanceCounter}`;
+    this.color = color;
+    this.dasharray = dasharray;
+    this.beforeId = beforeId;
+    this.label = label;
+    this.onChange = onChange ?? (() => {});
+    this.onError = onError ?? (() => {});
+    this.tilejson = null;
+    this.method = 'ccsm';
+    this.t = null; // null: the service picks t from the zoom (the morph); a number pins it
+    this.override = null; // a fixed morph zoom (tests, debugging); null follows the map
+    this.active = null;
+    this.pending = null;
+    this.swaps = 0;
+    this.cancelled = 0;
+    this._counter = 0;
+    this._handlers = {
+      render: () => this.update(),
+      idle: () => this._checkPending(),
+      sourcedata: (e) => this._onSourceData(e),
+      error: (e) => this._onMapError(e),
+    };
+    for (const [name, fn] of Object.entries(this._handlers)) map.on(name, fn);
+  }
+
+  /** The layer ids of the geometry currently on screen (for queryRenderedFeatures). */
+  get visibleLayerIds() {
+    return this.active ? this.active.layerIds.filter((id) => this.map.getLayer(id)) : [];
+  }
+
+  get desiredQ() {
+    if (!this.tilejson) return null;
+    const minzoom = this.tilejson.minzoom ?? 0;
+    const maxzoom = this.tilejson.maxzoom ?? 22;
+    const q = this.override ?? quantiseZoom(this.map.getZoom());
+    // Below minzoom nothing is drawn; past maxzoom tiles are over-zoomed and the shape no longer changes.
+    return Math.min(Math.max(q, minzoom), maxzoom + 1 - 1 / STEPS_PER_ZOOM);
+  }
+
+  keyFor(q) {
+    return `${this.method}|${this.t ?? 'auto'}|${q}`;
+  }
+
+  setDataset(tilejson) {
+    this._removeBuffer(this.pending);
+    this._removeBuffer(this.active);
+    this.pending = null;
+    this.active = null;
+    this.tilejson = tilejson;
+    this.update();
+  }
+
+  setOptions({method = this.method, t = this.t} = {}) {
+    this.method = method;
+    this.t = t;
+    this.update();
+  }
+
+  setOverride(q) {
+    this.override = q;
+    this.update();
+  }
+
+  /** True when what is on screen is what the current camera and options ask for. */
+  get settled() {
+    return !this.tilejson || (!this.pending && this.active?.key === this.keyFor(this.desiredQ));
+  }
+
+  state() {
+    return {
+      method: this.method,
+      t: this.t,
+      desiredQ: this.desiredQ,
+      activeQ: this.active?.q ?? null,
+      pendingQ: this.pending?.q ?? null,
+      swaps: this.swaps,
+      cancelled: this.cancelled,
+      settled: this.settled,
+    };
+  }
+
+  /** Called every rendered frame: start loading a new buffer when the wanted key changes. */
+  update() {
+    if (!this.tilejson || !this.map.isStyleLoaded()) return;
+    const q = this.desiredQ;
+    const key = this.keyFor(q);
+    if (this.pending) {
+      if (this.pending.key === key) return this._checkPending();
+      if (performance.now() - this.pending.started >= MIN_PROGRESS_MS) return this._checkPending();
+      // Overtaken: removing the source aborts its tile requests.
+      this._removeBuffer(this.pending);
+      this.pending = null;
+      this.cancelled += 1;
+    }
+    if (this.active?.key === key) return;
+    this.pending = this._addBuffer(q, key, !this.active);
+    this.onChange(this.state());
+  }
+
+  _addBuffer(q, key, firstBuffer) {
+    const n = ++this._counter;
+    const sourceId = `${this.id}-src-${n}`;
+    const {key: protocolKey, url} = registerSource({
+      template: this.tilejson.tiles[0],
+      q,
+      method: this.method,
+      t: this.t,
+    });
+    const tj = this.tilejson;
+    const source = {type: 'vector', tiles: [url], minzoom: tj.minzoom ?? 0, maxzoom: tj.maxzoom ?? 22};
+    if (tj.bounds) source.bounds = tj.bounds;
+    if (tj.attribution) source.attribution = tj.attribution;
+    this.map.addSource(sourceId, source);
+    const opacity = firstBuffer ? 1 : 0;
+    const base = {
+      type: 'line',
+      source: sourceId,
+      'source-layer': SOURCE_LAYER,
+      layout: {'line-join': 'round', 'line-cap': 'round'},
+    };
+    const dash = this.dasharray ? {'line-dasharray': this.dasharray} : {};
+    const layers = [
+      {
+        ...base,
+        id: `${sourceId}-line`,
+        filter: ['!', ['to-boolean', ['get', 'index']]],
+        paint: {'line-color': this.color, 'line-width': 0.8, 'line-opacity': opacity, ...dash},
+      },
+      {
+        ...base,
+        id: `${sourceId}-index`,
+        filter: ['to-boolean', ['get', 'index']],
+        paint: {'line-color': this.color, 'line-width': 1.8, 'line-opacity': opacity, ...dash},
+      },
+    ];
+    for (const layer of layers) this.map.addLayer(layer, this.beforeId);
+    return {
+      sourceId,
+      protocolKey,
+      layerIds: layers.map((l) => l.id),
+      q,
+      key,
+      method: this.method,
+      t: this.t,
+      started: performance.now(),
+      sawTile: false,
+    };
+  }
+
+  _removeBuffer(buffer) {
+    if (!buffer) return;
+    for (const id of buffer.layerIds) if (this.map.getLayer(id)) this.map.removeLayer(id);
+    if (this.map.getSource(buffer.sourceId)) this.map.removeSource(buffer.sourceId);
+    unregisterSource(buffer.protocolKey);
+  }
+
+  _onSourceData(e) {
+    if (!this.pending || e.sourceId !== this.pending.sourceId) return;
+    // 'metadata'/'content' events come before any tile is even wanted; only a tile event counts.
+    if (e.tile) this.pending.sawTile = true;
+    this._checkPending();
+  }
+
+  _onMapError(e) {
+    const buffers = [this.pending, this.active].filter(Boolean);
+    if (e.sourceId && !buffers.some((b) => b.sourceId === e.sourceId)) return;
+    if (!e.sourceId) return;
+    const message = e.error?.message ?? String(e.error ?? 'tile error');
+    if (/abort/i.test(message)) return;
+    this.onError(message);
+  }
+
+  _checkPending() {
+    const p = this.pending;
+    if (!p || !this.map.getSource(p.sourceId)) return;
+    let loaded = false;
+    try {
+      loaded = this.map.isSourceLoaded(p.sourceId);
+    } catch {
+      loaded = false;
+    }
+    // Right after addSource no tile is wanted yet and the source counts as loaded; wait for a tile, unless the
+    // map is idle (then nothing is in view and there is nothing to wait for).
+    if (!loaded || !(p.sawTile || this.map.loaded())) return;
+    this._swap();
+  }
+
+  _swap() {
+    const p = this.pending;
+    for (const id of p.layerIds) this.map.setPaintProperty(id, 'line-opacity', 1);
+    const old = this.active;
+    this.active = p;
+    this.pending = null;
+    this._removeBuffer(old);
+    this.swaps += 1;
+    this.onChange(this.state());
+    // The camera may have moved on while this buffer loaded.
+    this.update();
+  }
+
+  /** t of the features on screen (from the service's `t` field). */
+  visibleTStats() {
+    if (!this.active || !this.map.getSource(this.active.sourceId)) return null;
+    return tStats(this.map.querySourceFeatures(this.active.sourceId, {sourceLayer: SOURCE_LAYER}));
+  }
+
+  destroy() {
+    for (const [name, fn] of Object.entries(this._handlers)) this.map.off(name, fn);
+    this._removeBuffer(this.pending);
+    this._removeBuffer(this.active);
+    this.pending = null;
+    this.active = null;
+  }
+}
