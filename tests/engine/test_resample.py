@@ -1,0 +1,123 @@
+"""Tests of engine.resample: correspondence samples of L0 and Ln (paper section 2.1 (2))."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from numpy.testing import assert_allclose
+
+from engine.errors import InvalidContour, InvalidParameter
+from engine.geometry import closed_path
+from engine.resample import correspond, densify_path
+from engine.simplify import douglas_peucker
+
+HYPOTHESIS = settings(deadline=None, max_examples=50)
+
+
+@st.composite
+def line_with_characteristic(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, float]:
+    """A seeded open line (or a ring as a closed path), DP characteristic points, and a spacing."""
+    seed = draw(st.integers(0, 2**32 - 1))
+    n = draw(st.integers(3, 40))
+    ring = draw(st.booleans())
+    eps = draw(st.floats(0.0, 80.0))
+    spacing = draw(st.floats(2.0, 60.0))
+    rng = np.random.default_rng(seed)
+    if ring:
+        angle = np.sort(rng.uniform(0.0, 2.0 * np.pi, n + 1))[:n]
+        xy = np.column_stack([np.cos(angle), np.sin(angle)]) * rng.uniform(100.0, 200.0, (n, 1))
+        keep = douglas_peucker(xy, eps, closed=True)
+        xy = np.roll(xy, -int(keep[0]), axis=0)
+        keep = np.append(keep - keep[0], n)
+        path = closed_path(xy)
+    else:
+        path = np.cumsum(rng.normal(0.0, 30.0, (n, 2)), axis=0)
+        keep = douglas_peucker(path, eps)
+    return path + [750_000.0, 4_060_000.0], keep, spacing
+
+
+@given(line_with_characteristic())
+@HYPOTHESIS
+def test_correspond_keeps_every_vertex_of_l0_in_order(case: tuple[np.ndarray, np.ndarray, float]) -> None:
+    path, keep, spacing = case
+    initial = correspond(path, keep, spacing).initial
+    position = 0
+    for vertex in path:  # each vertex appears, in order, among the samples
+        hits = np.flatnonzero(np.all(initial[position:] == vertex, axis=1))
+        assert len(hits) > 0
+        position += int(hits[0]) + 1
+
+
+@given(line_with_characteristic())
+@HYPOTHESIS
+def test_correspond_characteristic_samples_coincide_on_both_sides(
+    case: tuple[np.ndarray, np.ndarray, float],
+) -> None:
+    path, keep, spacing = case
+    corr = correspond(path, keep, spacing)
+    assert len(corr.characteristic) == len(keep)
+    assert_allclose(corr.initial[corr.characteristic], path[keep], rtol=0, atol=1e-9)
+    assert_allclose(corr.target[corr.characteristic], path[keep], rtol=0, atol=1e-6)
+
+
+@given(line_with_characteristic())
+@HYPOTHESIS
+def test_correspond_target_samples_lie_on_the_segments_between_characteristic_points(
+    case: tuple[np.ndarray, np.ndarray, float],
+) -> None:
+    path, keep, spacing = case
+    corr = correspond(path, keep, spacing)
+    for piece in range(len(keep) - 1):
+        lo, hi = corr.characteristic[piece], corr.characteristic[piece + 1]
+        segment = shapely.LineString(path[[keep[piece], keep[piece + 1]]])
+        for point in corr.target[lo : hi + 1]:
+            assert segment.distance(shapely.Point(point)) <= 1e-6
+
+
+@given(line_with_characteristic())
+@HYPOTHESIS
+def test_correspond_gives_equal_counts_and_gaps_within_spacing(
+    case: tuple[np.ndarray, np.ndarray, float],
+) -> None:
+    path, keep, spacing = case
+    corr = correspond(path, keep, spacing)
+    assert corr.initial.shape == corr.target.shape
+    gaps = np.hypot(*np.diff(corr.initial, axis=0).T)
+    assert gaps.max() <= spacing * (1 + 1e-9)
+
+
+@given(line_with_characteristic())
+@HYPOTHESIS
+def test_correspond_target_advances_in_proportion_to_arc_length_on_l0(
+    case: tuple[np.ndarray, np.ndarray, float],
+) -> None:
+    path, keep, spacing = case
+    corr = correspond(path, keep, spacing)
+    for piece in range(len(keep) - 1):
+        lo, hi = corr.characteristic[piece], corr.characteristic[piece + 1]
+        l0 = np.hypot(*np.diff(corr.initial[lo : hi + 1], axis=0).T)
+        ln = np.hypot(*np.diff(corr.target[lo : hi + 1], axis=0).T)
+        chord = np.hypot(*(path[keep[piece + 1]] - path[keep[piece]]))
+        assert_allclose(ln, l0 / l0.sum() * chord, rtol=1e-6, atol=1e-6)
+
+
+def test_densify_path_splits_a_long_edge_into_equal_pieces() -> None:
+    points, vertex_index = densify_path(np.array([[0.0, 0.0], [10.0, 0.0], [11.0, 0.0]]), 4.0)
+    # 10 m at <= 4 m spacing: 3 pieces of 3.33 m; the 1 m edge stays whole.
+    assert_allclose(points[:, 0], [0.0, 10 / 3, 20 / 3, 10.0, 11.0], atol=1e-12)
+    assert vertex_index.tolist() == [0, 3, 4]
+
+
+@pytest.mark.parametrize("spacing", [0.0, -1.0, float("nan"), float("inf")])
+def test_correspond_rejects_a_non_positive_or_non_finite_spacing(spacing: float) -> None:
+    with pytest.raises(InvalidParameter):
+        correspond(np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 1.0]]), np.array([0, 2]), spacing)
+
+
+@pytest.mark.parametrize("keep", [[0, 1], [1, 2], [0], [0, 2, 1, 2]])
+def test_correspond_rejects_characteristic_points_missing_an_end_or_unordered(keep: list[int]) -> None:
+    with pytest.raises(InvalidContour):
+        correspond(np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 1.0]]), np.array(keep), 1.0)

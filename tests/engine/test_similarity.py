@@ -1,0 +1,165 @@
+"""Tests of engine.similarity: exact discrete Fréchet and the paper's Sim = 1 - dF / Length (eq. 9)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.distance import cdist
+
+from engine.errors import InvalidParameter
+from engine.similarity import (
+    SimilarityReference,
+    discrete_frechet_distance,
+    improved_frechet,
+    resample_count,
+    similarity,
+)
+
+HYPOTHESIS = settings(deadline=None, max_examples=60)
+
+
+def reference_frechet(p: np.ndarray, q: np.ndarray) -> float:
+    """Eiter & Mannila's O(nm) dynamic programme, in plain Python."""
+    n, m = len(p), len(q)
+    ca = [[0.0] * m for _ in range(n)]
+    for i in range(n):
+        for j in range(m):
+            d = math.hypot(p[i][0] - q[j][0], p[i][1] - q[j][1])
+            prev = (
+                0.0
+                if i == j == 0
+                else min(
+                    ca[i - 1][j] if i > 0 else math.inf,
+                    ca[i - 1][j - 1] if i > 0 and j > 0 else math.inf,
+                    ca[i][j - 1] if j > 0 else math.inf,
+                )
+            )
+            ca[i][j] = max(prev, d)
+    return ca[-1][-1]
+
+
+@st.composite
+def curve_pairs(draw: st.DrawFn, max_points: int = 14) -> tuple[np.ndarray, np.ndarray]:
+    seed = draw(st.integers(0, 2**32 - 1))
+    n = draw(st.integers(1, max_points))
+    m = draw(st.integers(1, max_points))
+    rng = np.random.default_rng(seed)
+    p = np.cumsum(rng.normal(0.0, 5.0, (n, 2)), axis=0)
+    q = np.cumsum(rng.normal(0.0, 5.0, (m, 2)), axis=0) + rng.normal(0.0, 3.0, 2)
+    return p, q
+
+
+@given(curve_pairs())
+@HYPOTHESIS
+def test_discrete_frechet_equals_the_quadratic_reference(pq: tuple[np.ndarray, np.ndarray]) -> None:
+    p, q = pq
+    assert discrete_frechet_distance(p, q) == pytest.approx(reference_frechet(p, q), abs=1e-9)
+
+
+@given(curve_pairs())
+@HYPOTHESIS
+def test_discrete_frechet_is_symmetric(pq: tuple[np.ndarray, np.ndarray]) -> None:
+    p, q = pq
+    assert discrete_frechet_distance(p, q) == pytest.approx(discrete_frechet_distance(q, p), abs=1e-9)
+
+
+@given(curve_pairs())
+@HYPOTHESIS
+def test_discrete_frechet_of_a_curve_with_itself_is_zero(pq: tuple[np.ndarray, np.ndarray]) -> None:
+    p, _ = pq
+    assert discrete_frechet_distance(p, p.copy()) == 0.0
+
+
+@given(curve_pairs())
+@HYPOTHESIS
+def test_discrete_frechet_is_at_least_the_discrete_hausdorff_distance(
+    pq: tuple[np.ndarray, np.ndarray],
+) -> None:
+    p, q = pq
+    d = cdist(p, q)
+    hausdorff = max(d.min(axis=1).max(), d.min(axis=0).max())
+    assert discrete_frechet_distance(p, q) >= hausdorff - 1e-9
+
+
+@given(curve_pairs(), st.floats(-1e6, 1e6), st.floats(-1e6, 1e6))
+@HYPOTHESIS
+def test_discrete_frechet_is_invariant_to_translating_both_curves(
+    pq: tuple[np.ndarray, np.ndarray], dx: float, dy: float
+) -> None:
+    p, q = pq
+    shift = np.array([dx, dy])
+    expected = discrete_frechet_distance(p, q)
+    assert discrete_frechet_distance(p + shift, q + shift) == pytest.approx(expected, rel=1e-9, abs=1e-6)
+
+
+def test_discrete_frechet_of_parallel_segments_is_their_offset() -> None:
+    p = np.array([[0.0, 0.0], [1.0, 0.0]])
+    q = np.array([[0.0, 1.0], [1.0, 1.0]])
+    assert discrete_frechet_distance(p, q) == pytest.approx(1.0, abs=1e-12)
+
+
+def test_discrete_frechet_rejects_an_empty_sequence() -> None:
+    with pytest.raises(InvalidParameter):
+        discrete_frechet_distance(np.zeros((0, 2)), np.zeros((3, 2)))
+
+
+def test_discrete_frechet_on_long_utm_curves_matches_shapely() -> None:
+    # 400 x 400 points at UTM-sized coordinates: exercises the band and the bound's rounding margin.
+    rng = np.random.default_rng(5)
+    p = np.array([750_000.0, 4_060_000.0]) + np.cumsum(rng.normal(0.0, 5.0, (400, 2)), axis=0)
+    q = p + rng.normal(0.0, 2.0, p.shape)
+    expected = shapely.frechet_distance(shapely.LineString(p), shapely.LineString(q), densify=None)
+    # shapely's (undensified) Fréchet is the discrete one over the vertices.
+    assert discrete_frechet_distance(p, q) == pytest.approx(expected, rel=1e-9)
+
+
+# --- Sim ----------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("closed", [False, True])
+def test_similarity_of_a_curve_with_itself_is_one(closed: bool) -> None:
+    angle = np.linspace(0.0, 2.0 * np.pi, 50, endpoint=False)
+    coords = np.column_stack([300.0 * np.cos(angle), 200.0 * np.sin(angle)])
+    assert similarity(coords, coords.copy(), closed) == pytest.approx(1.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("shift", [(3.0, 4.0), (0.0, 12.5), (-7.0, 1.0)])
+def test_similarity_of_a_shifted_open_line_is_one_minus_shift_over_length(shift: tuple[float, float]) -> None:
+    rng = np.random.default_rng(2)
+    line = np.cumsum(rng.normal(0.0, 20.0, (40, 2)), axis=0)
+    length = float(np.hypot(*np.diff(line, axis=0).T).sum())
+    moved = line + np.array(shift)
+    expected = 1.0 - math.hypot(*shift) / length
+    assert similarity(line, moved, closed=False) == pytest.approx(expected, abs=1e-9)
+
+
+def test_similarity_of_a_shifted_ring_is_one_minus_shift_over_perimeter() -> None:
+    square = np.array([[0.0, 0.0], [100.0, 0.0], [100.0, 100.0], [0.0, 100.0]])
+    assert similarity(square, square + [6.0, 8.0], closed=True) == pytest.approx(1.0 - 10.0 / 400.0, abs=1e-9)
+
+
+def test_improved_frechet_is_the_distance_after_equal_count_resampling() -> None:
+    # L0 = straight 100 m; L = the same segment with an extra middle vertex: identical after resampling.
+    l0 = np.array([[0.0, 0.0], [100.0, 0.0]])
+    other = np.array([[0.0, 0.0], [50.0, 0.0], [100.0, 0.0]])
+    assert improved_frechet(l0, other, closed=False, spacing_m=10.0) == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("length", "spacing", "cap", "expected"),
+    [(100.0, 10.0, 2000, 11), (0.0, 10.0, 2000, 2), (1e6, 10.0, 2000, 2000), (104.0, 10.0, 2000, 11)],
+)
+def test_resample_count_is_one_per_spacing_at_least_two_at_most_the_cap(
+    length: float, spacing: float, cap: int, expected: int
+) -> None:
+    assert resample_count(length, spacing, cap) == expected
+
+
+def test_similarity_reference_rejects_a_zero_length_contour() -> None:
+    with pytest.raises(InvalidParameter):
+        SimilarityReference.of(np.array([[1.0, 1.0], [1.0, 1.0]]), closed=False)

@@ -1,0 +1,166 @@
+"""Tests of engine.surface: the CCS fit, with geomdl's global surface interpolation as the oracle."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from geomdl import fitting
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from numpy.testing import assert_allclose
+
+from engine.errors import SurfaceFitError
+from engine.surface import (
+    WIREFRAME_HEIGHTS,
+    averaged_knots,
+    averaged_parameters,
+    fit_surface,
+    tessellation_parameters,
+    wireframe,
+)
+
+ORIGIN = np.array([750_000.0, 4_060_000.0])
+
+
+def open_samples(seed: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """A seeded open L0 sample row and its straight-line target row (equal counts)."""
+    rng = np.random.default_rng(seed)
+    initial = ORIGIN + np.cumsum(rng.normal(0.0, 8.0, (n, 2)) + [12.0, 0.0], axis=0)
+    target = np.linspace(initial[0], initial[-1], n)
+    return initial, target
+
+
+def ring_samples(n: int = 40) -> tuple[np.ndarray, np.ndarray]:
+    """A closed path (first point repeated) of a wobbly circle and of a smooth circle."""
+    angle = np.linspace(0.0, 2.0 * np.pi, n)
+    radius = 300.0 + 20.0 * np.sin(5 * angle)
+    initial = ORIGIN + radius[:, None] * np.column_stack([np.cos(angle), np.sin(angle)])
+    target = ORIGIN + 290.0 * np.column_stack([np.cos(angle), np.sin(angle)])
+    initial[-1] = initial[0]
+    target[-1] = target[0]
+    return initial, target
+
+
+def geomdl_surface(initial: np.ndarray, target: np.ndarray):  # type: ignore[no-untyped-def]
+    grid = wireframe(initial, target)
+    n = initial.shape[0]
+    points = [[float(c) for c in grid[v, u]] for u in range(n) for v in range(4)]
+    return fitting.interpolate_surface(points, n, 4, 3, 3)
+
+
+@pytest.mark.parametrize(("seed", "n"), [(0, 6), (1, 12), (2, 25), (3, 40)])
+def test_surface_evaluates_like_geomdls_interpolated_surface(seed: int, n: int) -> None:
+    initial, target = open_samples(seed, n)
+    oracle = geomdl_surface(initial, target)
+    fitted = fit_surface(initial, target, closed=False)
+    us = np.linspace(0.0, 1.0, 17)
+    for v in np.linspace(0.0, 1.0, 7):
+        expected = np.array([oracle.evaluate_single((float(u), float(v))) for u in us])
+        assert_allclose(fitted.evaluate(us, v), expected, rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize(("seed", "n"), [(4, 8), (5, 30)])
+def test_to_geomdl_reproduces_geomdls_control_points_and_knots(seed: int, n: int) -> None:
+    initial, target = open_samples(seed, n)
+    oracle = geomdl_surface(initial, target)
+    exported = fit_surface(initial, target, closed=False).to_geomdl()
+    assert (exported.ctrlpts_size_u, exported.ctrlpts_size_v) == (
+        oracle.ctrlpts_size_u,
+        oracle.ctrlpts_size_v,
+    )
+    assert_allclose(exported.ctrlpts, oracle.ctrlpts, rtol=0, atol=1e-6)
+    assert_allclose(exported.knotvector_u, oracle.knotvector_u, rtol=0, atol=1e-12)
+    assert_allclose(exported.knotvector_v, oracle.knotvector_v, rtol=0, atol=1e-12)
+
+
+def test_averaged_parameters_and_knots_match_geomdl() -> None:
+    initial, target = open_samples(6, 15)
+    oracle = geomdl_surface(initial, target)
+    params = averaged_parameters(wireframe(initial, target))
+    assert_allclose(averaged_knots(params), oracle.knotvector_u, rtol=0, atol=1e-12)
+
+
+def test_averaged_parameters_of_one_evenly_spaced_row_are_even() -> None:
+    row = np.column_stack([np.arange(5.0), np.zeros(5)])[None]
+    assert_allclose(averaged_parameters(row), [0.0, 0.25, 0.5, 0.75, 1.0], atol=1e-15)
+
+
+def test_wireframe_rows_are_evenly_spaced_on_each_link() -> None:
+    initial, target = open_samples(7, 10)
+    grid = wireframe(initial, target)
+    assert grid.shape == (4, 10, 3)
+    assert_allclose(grid[:, :, 2], np.repeat(np.array(WIREFRAME_HEIGHTS)[:, None], 10, axis=1), atol=0)
+    assert_allclose(grid[1, :, :2], initial + (target - initial) / 3.0, rtol=0, atol=1e-6)
+    assert_allclose(grid[2, :, :2], initial + 2.0 * (target - initial) / 3.0, rtol=0, atol=1e-6)
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(4, 30), st.floats(0.0, 1.0), st.floats(0.0, 1.0))
+@settings(deadline=None, max_examples=40)
+def test_surface_is_ruled_with_height_equal_to_v(seed: int, n: int, u: float, v: float) -> None:
+    initial, target = open_samples(seed, n)
+    fitted = fit_surface(initial, target, closed=False)
+    uu = np.array([u])
+    point = fitted.evaluate(uu, v)[0]
+    assert point[2] == v
+    expected_xy = (1.0 - v) * fitted.evaluate(uu, 0.0)[0, :2] + v * fitted.evaluate(uu, 1.0)[0, :2]
+    assert_allclose(point[:2], expected_xy, rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("closed", [False, True])
+def test_surface_passes_through_every_data_point_at_its_parameter(closed: bool) -> None:
+    initial, target = ring_samples() if closed else open_samples(8, 30)
+    fitted = fit_surface(initial, target, closed=closed)
+    grid = wireframe(initial, target)
+    for row, h in enumerate(WIREFRAME_HEIGHTS):
+        assert_allclose(fitted.evaluate(fitted.params, h), grid[row], rtol=0, atol=1e-6)
+
+
+def test_ring_surface_is_closed_and_c2_at_the_seam() -> None:
+    initial, target = ring_samples()
+    fitted = fit_surface(initial, target, closed=True)
+    for curve in (fitted.base, fitted.top):
+        for order in range(3):
+            start = curve(0.0, nu=order)
+            end = curve(1.0, nu=order)
+            scale = max(1.0, float(np.abs(start).max()))
+            assert_allclose(end, start, rtol=0, atol=1e-6 * scale)
+
+
+def test_open_surface_is_not_forced_periodic() -> None:
+    # An open line's curve has free ends: its first derivatives at u = 0 and 1 differ in general.
+    initial, target = open_samples(9, 20)
+    fitted = fit_surface(initial, target, closed=False)
+    assert not np.allclose(fitted.base(0.0, nu=1), fitted.base(1.0, nu=1), atol=1.0)
+
+
+def test_ring_surface_cannot_be_exported_to_geomdl() -> None:
+    initial, target = ring_samples()
+    with pytest.raises(SurfaceFitError):
+        fit_surface(initial, target, closed=True).to_geomdl()
+
+
+@pytest.mark.parametrize("n", [0, 1, 3])
+def test_fit_surface_needs_at_least_four_samples(n: int) -> None:
+    initial, target = open_samples(10, 4)
+    with pytest.raises(SurfaceFitError):
+        fit_surface(initial[:n], target[:n], closed=False)
+
+
+def test_fit_surface_rejects_repeated_samples() -> None:
+    initial, target = open_samples(11, 8)
+    initial[3] = initial[2]
+    target[3] = target[2]
+    with pytest.raises(SurfaceFitError):
+        fit_surface(initial, target, closed=False)
+
+
+def test_fit_surface_rejects_rows_of_different_shapes() -> None:
+    initial, target = open_samples(12, 8)
+    with pytest.raises(SurfaceFitError):
+        fit_surface(initial, target[:-1], closed=False)
+
+
+def test_tessellation_parameters_insert_evenly_between_data_parameters() -> None:
+    params = np.array([0.0, 0.4, 1.0])
+    assert_allclose(tessellation_parameters(params, 0), params, atol=0)
+    assert_allclose(tessellation_parameters(params, 1), [0.0, 0.2, 0.4, 0.7, 1.0], atol=1e-15)
