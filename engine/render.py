@@ -1,0 +1,622 @@
+"""Tiles and /simplify output from a store: the per-request work, none of which scales with the dataset.
+
+A tile is: R*Tree lookup of the buffered tile -> per contour t from its t(scale) table at the tile's scale
+-> slice ``(1 - t) base + t top`` (EPSG:3857) -> quantise to the tile grid (dropping repeated points) ->
+clip to the buffered tile -> encode. Decoded contour rows are kept in an LRU cache, and so are the baseline
+simplifiers' results per (contour, method, scale step), since Wang–Müller is pure Python.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections import OrderedDict
+from collections.abc import Callable, Hashable, Sequence
+from dataclasses import dataclass
+from typing import Any, Generic, TypeVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from engine.crs import WEB_MERCATOR, make_transformer
+from engine.errors import InvalidParameter
+from engine.geometry import closed_path
+from engine.mvt import LineFeature, encode_tile
+from engine.scale import scale_for_zoom
+from engine.similarity import similarity
+from engine.store import CCSStore, ContourRecord, DatasetInfo
+from engine.tiles import (
+    Bounds,
+    Tile,
+    buffered,
+    check_fractional_zoom,
+    chunk_bounds,
+    collinear_free,
+    row_runs,
+    check_tile,
+    clip_to_grid,
+    lonlat_to_mercator,
+    mercator_to_lonlat,
+    quantize,
+    tile_bounds,
+    tile_center_latitude,
+)
+from engine.types import METHODS, Coords
+
+#: Largest scale denominator /simplify accepts (1:10 billion is already smaller than a whole-earth map).
+MAX_SCALE = 1e10
+#: Baseline results are cached per 1/16 of a zoom level of scale: a 4 % step, invisible on screen.
+SCALE_STEPS_PER_OCTAVE = 16
+#: Index contours are every 5th interval.
+INDEX_EVERY = 5
+#: Decimals of the ``t`` property (1e-4 of the source-to-target range is far below a pixel).
+T_DECIMALS = 4
+
+K = TypeVar("K", bound=Hashable)
+V = TypeVar("V")
+
+
+class LRUCache(Generic[K, V]):
+    """A thread-safe least-recently-used cache bounded by a total cost (entries or bytes)."""
+
+    def __init__(self, max_cost: int, cost: Callable[[V], int] = lambda v: 1) -> None:
+        self.max_cost = max_cost
+        self._cost = cost
+        self._data: OrderedDict[K, tuple[V, int]] = OrderedDict()
+        self._total = 0
+        self._lock = threading.Lock()
+        self.hits = 0
+        self.misses = 0
+
+    def get(self, key: K) -> V | None:
+        """The cached value, or None."""
+        with self._lock:
+            item = self._data.get(key)
+            if item is None:
+                self.misses += 1
+                return None
+            self._data.move_to_end(key)
+            self.hits += 1
+            return item[0]
+
+    def put(self, key: K, value: V) -> None:
+        """Store a value, evicting the least recently used ones beyond ``max_cost``."""
+        c = self._cost(value)
+        with self._lock:
+            old = self._data.pop(key, None)
+            if old is not None:
+                self._total -= old[1]
+            self._data[key] = (value, c)
+            self._total += c
+            while self._total > self.max_cost and len(self._data) > 1:
+                _, (_, oc) = self._data.popitem(last=False)
+                self._total -= oc
+
+    def clear(self) -> None:
+        """Drop everything."""
+        with self._lock:
+            self._data.clear()
+            self._total = 0
+
+    def __len__(self) -> int:
+        return len(self._data)
+
+    @property
+    def total_cost(self) -> int:
+        """Sum of the costs of the cached values."""
+        return self._total
+
+
+@dataclass(frozen=True)
+class TileOptions:
+    """How tiles are cut: grid size, buffer (grid units), layer name, served zoom range."""
+
+    extent: int = 4096
+    buffer_px: int = 64
+    layer: str = "contours"
+    min_zoom: int = 0
+    max_zoom: int = 16
+
+
+@dataclass(frozen=True)
+class TileResult:
+    """A rendered tile: MVT bytes (None when it has no feature), the zoom and scale it was drawn at."""
+
+    data: bytes | None
+    features: int
+    zoom: float
+    scale: float
+
+
+@dataclass(frozen=True)
+class SimplifiedContour:
+    """One contour of a /simplify answer: longitude/latitude coordinates (a ring as a closed path)."""
+
+    fid: int
+    contour_id: str
+    elevation: float
+    t: float
+    similarity: float
+    coords_lonlat: Coords
+
+
+def check_method(method: str) -> str:
+    """Validate a method name.
+
+    Raises
+    ------
+    InvalidParameter
+        Not one of ccsm, dp, wm, vw, original.
+    """
+    if method not in METHODS:
+        raise InvalidParameter(f"unknown method {method!r}; expected one of {', '.join(METHODS)}")
+    return method
+
+
+def check_scale(scale: float) -> float:
+    """Validate a scale denominator: finite, > 0 and at most MAX_SCALE."""
+    value = float(scale)
+    if not math.isfinite(value) or value <= 0 or value > MAX_SCALE:
+        raise InvalidParameter(f"scale {scale} must be a positive number up to {MAX_SCALE:g}")
+    return value
+
+
+def check_t_override(t: float | None) -> float | None:
+    """Validate a hand-pinned t (None = from the scale)."""
+    if t is None:
+        return None
+    value = float(t)
+    if not math.isfinite(value) or not 0.0 <= value <= 1.0:
+        raise InvalidParameter(f"t {t} must lie in [0, 1]")
+    return value
+
+
+def check_bbox(bbox: Sequence[float]) -> Bounds:
+    """Validate a (west, south, east, north) bbox in degrees."""
+    if len(bbox) != 4:
+        raise InvalidParameter(f"bbox needs 4 numbers west,south,east,north; got {len(bbox)}")
+    w, s, e, n = (float(v) for v in bbox)
+    if not all(math.isfinite(v) for v in (w, s, e, n)):
+        raise InvalidParameter("bbox values must be finite numbers")
+    if not (-180 <= w <= 180 and -180 <= e <= 180 and -90 <= s <= 90 and -90 <= n <= 90):
+        raise InvalidParameter(f"bbox {w},{s},{e},{n} lies outside longitude [-180, 180] / latitude [-90, 90]")
+    if w > e or s > n:
+        raise InvalidParameter(f"bbox {w},{s},{e},{n} has min > max (expected west,south,east,north)")
+    return Bounds(w, s, e, n)
+
+
+def infer_interval(elevations: NDArray[np.float64]) -> float | None:
+    """The most common difference between sorted distinct elevations."""
+    levels = np.unique(np.round(elevations, 6))
+    if len(levels) < 2:
+        return None
+    steps, counts = np.unique(np.round(np.diff(levels), 6), return_counts=True)
+    return float(steps[np.argmax(counts)])
+
+
+def is_index(elevation: float, interval: float | None) -> bool:
+    """True when the elevation is a multiple of INDEX_EVERY intervals."""
+    if not interval:
+        return False
+    q = elevation / (INDEX_EVERY * interval)
+    return abs(q - round(q)) < 1e-6
+
+
+def t_at_scales(ladder: NDArray[np.float64], tables: NDArray[np.float64], scale: float) -> NDArray[np.float64]:
+    """Each row of ``tables`` ((n, S) t at the ladder's scales) interpolated at one scale, as ``t_for_scale``.
+
+    The interpolation weights depend on the ladder and the scale only, so they are found once for all rows.
+    """
+    logs = np.log(ladder)
+    x = math.log(scale)
+    if x <= logs[0]:
+        return np.zeros(len(tables))  # at and above the source scale: full detail
+    if x >= logs[-1]:
+        return tables[:, -1].copy()
+    i = int(np.searchsorted(logs, x, side="right")) - 1
+    f = (x - logs[i]) / (logs[i + 1] - logs[i])
+    return tables[:, i] * (1 - f) + tables[:, i + 1] * f
+
+
+def _significant(sig: NDArray[np.float32], a: int, b: int, min_sig: float) -> NDArray[np.intp]:
+    """Indices in [a, b) of the rows more significant than ``min_sig``, both ends of the range included."""
+    keep = sig[a:b] > min_sig
+    keep[0] = keep[-1] = True
+    return np.flatnonzero(keep) + a
+
+
+@dataclass(frozen=True)
+class PreparedContour:
+    """A stored contour plus what speeds up its tiles: chunk boxes of its rows and its target's corners."""
+
+    rec: ContourRecord
+    chunks: NDArray[np.float64]
+    original_chunks: NDArray[np.float64]
+    top_reduced: NDArray[np.float64]
+
+    @classmethod
+    def of(cls, rec: ContourRecord) -> PreparedContour:
+        """Prepare a decoded row."""
+        return cls(
+            rec,
+            chunk_bounds([rec.base, rec.top]),
+            chunk_bounds([rec.original]),
+            rec.top[collinear_free(rec.top)],
+        )
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held."""
+        return self.rec.nbytes + self.chunks.nbytes + self.original_chunks.nbytes + self.top_reduced.nbytes
+
+
+class Renderer:
+    """Renders tiles and /simplify answers from a store, with in-memory caches.
+
+    Parameters
+    ----------
+    store
+        The store to read.
+    options
+        Tile grid and zoom range.
+    contour_cache_bytes
+        Memory for decoded contour rows.
+    baseline_cache_entries
+        Number of baseline results kept.
+    """
+
+    def __init__(
+        self,
+        store: CCSStore,
+        options: TileOptions | None = None,
+        *,
+        contour_cache_bytes: int = 512 << 20,
+        baseline_cache_entries: int = 100_000,
+    ) -> None:
+        self.store = store
+        self.options = options or TileOptions()
+        self.contours: LRUCache[int, PreparedContour] = LRUCache(contour_cache_bytes, lambda r: r.nbytes + 1024)
+        self.baselines: LRUCache[tuple[int, str, int], tuple[Coords, Coords]] = LRUCache(baseline_cache_entries)
+        self._info: dict[str, tuple[DatasetInfo, float | None]] = {}
+        self._transformers: dict[str, Callable[[Any], Coords]] = {}
+
+    # -- metadata ----------------------------------------------------------------------------------------
+    def info(self, dataset: str) -> tuple[DatasetInfo, float | None]:
+        """The dataset's metadata and contour interval, cached per data_version.
+
+        Raises
+        ------
+        UnknownLayer
+            The dataset is not stored.
+        """
+        version = self.store.data_version(dataset)
+        cached = self._info.get(dataset)
+        if cached is not None and version is not None and cached[0].data_version == version:
+            return cached
+        info = self.store.dataset(dataset)
+        interval = info.interval
+        if not interval:
+            con = self.store._con()
+            elev = np.array([r[0] for r in con.execute("SELECT DISTINCT elevation FROM contours WHERE dataset=?", (dataset,))])
+            interval = infer_interval(elev) if len(elev) else None
+        self._info[dataset] = (info, interval)
+        return info, interval
+
+    def forget(self, dataset: str) -> None:
+        """Drop cached metadata of a dataset (after a delete or rebuild; contour rows get new fids anyway)."""
+        self._info.pop(dataset, None)
+
+    def records(self, fids: Sequence[int]) -> list[ContourRecord]:
+        """Decoded contour rows, from the cache or the store."""
+        return [p.rec for p in self.prepared(fids)]
+
+    def prepared(self, fids: Sequence[int]) -> list[PreparedContour]:
+        """Decoded contour rows with their chunk indexes, from the cache or the store."""
+        out: list[PreparedContour | None] = [self.contours.get(f) for f in fids]
+        missing = [f for f, r in zip(fids, out, strict=True) if r is None]
+        if missing:
+            loaded = {r.fid: PreparedContour.of(r) for r in self.store.load(missing)}
+            for f, r in loaded.items():
+                self.contours.put(f, r)
+            out = [r if r is not None else loaded.get(f) for f, r in zip(fids, out, strict=True)]
+        return [r for r in out if r is not None]
+
+    # -- geometry per method -----------------------------------------------------------------------------
+    def _baseline(self, info: DatasetInfo, rec: ContourRecord, method: str, scale: float) -> tuple[Coords, Coords]:
+        """(EPSG:3857 closed path, working-CRS coordinates) of a baseline's result at a scale (cached)."""
+        from engine.baselines import simplify_at_scale
+
+        step = round(math.log2(scale) * SCALE_STEPS_PER_OCTAVE)
+        key = (rec.fid, method, step)
+        hit = self.baselines.get(key)
+        if hit is not None:
+            return hit
+        snapped = 2.0 ** (step / SCALE_STEPS_PER_OCTAVE)
+        result_w = np.asarray(simplify_at_scale(method, rec.original_w, rec.closed, snapped), dtype=np.float64)
+        tr = self._transformers.get(info.working_crs)
+        if tr is None:
+            tr = self._transformers[info.working_crs] = make_transformer(info.working_crs, WEB_MERCATOR)
+        result = tr(closed_path(result_w) if rec.closed else result_w)
+        value = (result, result_w)
+        self.baselines.put(key, value)
+        return value
+
+    def _parts(
+        self,
+        info: DatasetInfo,
+        preps: Sequence[PreparedContour],
+        ts: NDArray[np.float64],
+        method: str,
+        scale: float,
+        box: Bounds,
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]:
+        """The pieces of every contour's line near ``box`` for a method.
+
+        Returns
+        -------
+        (xy, lens, owner)
+            Concatenated EPSG:3857 coordinates of the pieces, each piece's length, and the index (into
+            ``preps``) of the contour each piece belongs to.
+        """
+        bases: list[NDArray[np.float64]] = []
+        tops: list[NDArray[np.float64]] = []
+        owner: list[int] = []
+        part_t: list[float] = []
+        # Rows whose significance is below half a grid unit cannot move the quantised line (engine.rowsig).
+        min_sig = 0.5 * (box.maxx - box.minx) / (self.options.extent + 2 * self.options.buffer_px)
+        for i, p in enumerate(preps):
+            rec = p.rec
+            if method == "ccsm":
+                t = float(ts[i])
+                if t >= 1.0:  # the target contour: its straight runs need only their end rows
+                    bases.append(p.top_reduced)
+                    tops.append(p.top_reduced)
+                    owner.append(i)
+                    part_t.append(0.0)
+                    continue
+                for a, b in row_runs(p.chunks, box, len(rec.base)):
+                    rows = _significant(rec.sig, a, b, min_sig)
+                    bases.append(rec.base[rows])
+                    tops.append(rec.top[rows])
+                    owner.append(i)
+                    part_t.append(t)
+            elif method == "original":
+                for a, b in row_runs(p.original_chunks, box, len(rec.original)):
+                    bases.append(rec.original[_significant(rec.sig_original, a, b, min_sig)])
+                    owner.append(i)
+            else:
+                bases.append(self._baseline(info, rec, method, scale)[0])
+                owner.append(i)
+        if not bases:
+            empty = np.zeros(0, dtype=np.int64)
+            return np.zeros((0, 2)), empty, empty
+        lens = np.fromiter((len(b) for b in bases), dtype=np.int64, count=len(bases))
+        base = np.concatenate(bases)
+        if method == "ccsm":
+            top = np.concatenate(tops)
+            tt = np.repeat(np.asarray(part_t), lens)[:, None]
+            xy = base + tt * (top - base)
+        else:
+            xy = base
+        return xy, lens, np.asarray(owner, dtype=np.int64)
+
+    @staticmethod
+    def _visible(recs: Sequence[ContourRecord], scale: float, method: str) -> list[int]:
+        if method == "original":
+            return list(range(len(recs)))
+        return [i for i, r in enumerate(recs) if scale < r.vanish_scale]
+
+    def _t_values(self, info: DatasetInfo, recs: Sequence[ContourRecord], scale: float, t: float | None) -> NDArray[np.float64]:
+        if t is not None:
+            return np.full(len(recs), t)
+        if not recs:
+            return np.zeros(0)
+        tables = np.stack([r.t_at_scale for r in recs])
+        return t_at_scales(info.ladder, tables, scale)
+
+    # -- tiles -------------------------------------------------------------------------------------------
+    def scale_of_tile(self, tile: Tile, zoom: float) -> float:
+        """Scale denominator a tile is drawn at: fractional ``zoom`` at the latitude of the tile's centre."""
+        lat = max(-85.05, min(85.05, tile_center_latitude(tile)))
+        return float(scale_for_zoom(zoom, lat))
+
+    def check_tile_request(
+        self, z: int, x: int, y: int, zoom: float | None, method: str, t: float | None
+    ) -> tuple[Tile, float, float | None]:
+        """Validate a tile request without rendering it (raises TileOutOfRange / InvalidParameter)."""
+        tile = check_tile(z, x, y, self.options.min_zoom, self.options.max_zoom)
+        zoomf = check_fractional_zoom(z, zoom)
+        check_method(method)
+        return tile, zoomf, check_t_override(t)
+
+    def tile(
+        self,
+        dataset: str,
+        z: int,
+        x: int,
+        y: int,
+        *,
+        zoom: float | None = None,
+        method: str = "ccsm",
+        t: float | None = None,
+    ) -> TileResult:
+        """Render one tile of a dataset.
+
+        Parameters
+        ----------
+        dataset
+            Stored dataset id.
+        z, x, y
+            XYZ tile index.
+        zoom
+            Fractional zoom in [z, z + 1) the tile is drawn at (default z).
+        method
+            ccsm, dp, wm, vw or original.
+        t
+            Pin t for every contour (method ccsm only; other methods ignore it).
+
+        Returns
+        -------
+        TileResult
+            ``data`` is None when no contour is visible in the tile.
+
+        Raises
+        ------
+        TileOutOfRange, InvalidParameter, UnknownLayer
+        """
+        tile, zoomf, t_pin = self.check_tile_request(z, x, y, zoom, method, t)
+        info, interval = self.info(dataset)
+        opts = self.options
+        bounds = tile_bounds(tile)
+        box = buffered(bounds, opts.buffer_px, opts.extent)
+        scale = self.scale_of_tile(tile, zoomf)
+        fids = self.store.query(dataset, box)
+        if not fids:
+            return TileResult(None, 0, zoomf, scale)
+        preps = self.prepared(fids)
+        keep = self._visible([p.rec for p in preps], scale, method)
+        preps = [preps[i] for i in keep]
+        if not preps:
+            return TileResult(None, 0, zoomf, scale)
+        recs = [p.rec for p in preps]
+        ts = self._t_values(info, recs, scale, t_pin if method == "ccsm" else None)
+        xy, lens, owner = self._parts(info, preps, ts, method, scale, box)
+        if len(lens) == 0:
+            return TileResult(None, 0, zoomf, scale)
+        features = self._features(recs, ts, xy, lens, owner, bounds, interval)
+        if not features:
+            return TileResult(None, 0, zoomf, scale)
+        return TileResult(encode_tile({opts.layer: features}, opts.extent), len(features), zoomf, scale)
+
+    def _features(
+        self,
+        recs: Sequence[ContourRecord],
+        ts: NDArray[np.float64],
+        xy: NDArray[np.float64],
+        lens: NDArray[np.int64],
+        owner: NDArray[np.int64],
+        bounds: Bounds,
+        interval: float | None,
+    ) -> list[LineFeature]:
+        opts = self.options
+        q = quantize(xy, bounds, opts.extent)
+        # Drop consecutive repeats inside each piece (the first point of every piece always stays).
+        keep = np.empty(len(q), dtype=bool)
+        keep[0] = True
+        np.any(q[1:] != q[:-1], axis=1, out=keep[1:])
+        starts = np.cumsum(lens) - lens
+        keep[starts] = True
+        piece = np.repeat(np.arange(len(lens)), lens)[keep]
+        q = q[keep]
+        new_lens = np.bincount(piece, minlength=len(lens))
+        new_starts = np.cumsum(new_lens) - new_lens
+        lo, hi = -opts.buffer_px, opts.extent + opts.buffer_px
+        mins = np.minimum.reduceat(q.min(axis=1), new_starts)
+        maxs = np.maximum.reduceat(q.max(axis=1), new_starts)
+        inside = ((mins >= lo) & (maxs <= hi)).tolist()
+        new_lens_l = new_lens.tolist()
+        new_starts_l = new_starts.tolist()
+        by_owner: dict[int, list[NDArray[np.int64]]] = {}
+        for k, i in enumerate(owner.tolist()):
+            n = new_lens_l[k]
+            if n < 2:
+                continue
+            s = new_starts_l[k]
+            line = q[s : s + n]
+            parts = [line] if inside[k] else clip_to_grid(line, lo, hi)
+            if parts:
+                by_owner.setdefault(i, []).extend(parts)
+        features = []
+        index_cache: dict[float, bool] = {}
+        for i, parts in by_owner.items():
+            rec = recs[i]
+            elev = float(rec.elevation)
+            idx = index_cache.get(elev)
+            if idx is None:
+                idx = index_cache[elev] = is_index(elev, interval)
+            features.append(
+                LineFeature(rec.fid, parts, {"elevation": elev, "index": idx, "t": round(float(ts[i]), T_DECIMALS)})
+            )
+        return features
+
+    # -- /simplify ---------------------------------------------------------------------------------------
+    def simplify(
+        self,
+        dataset: str,
+        scale: float,
+        *,
+        bbox_lonlat: Sequence[float] | None = None,
+        method: str = "ccsm",
+    ) -> list[SimplifiedContour]:
+        """Every visible contour of a dataset at a scale denominator, in longitude/latitude.
+
+        Parameters
+        ----------
+        dataset
+            Stored dataset id.
+        scale
+            Scale denominator, > 0 (any value: t is interpolated in each contour's table).
+        bbox_lonlat
+            (west, south, east, north) degrees: only contours whose extent meets it.
+        method
+            ccsm, dp, wm, vw or original.
+
+        Raises
+        ------
+        InvalidParameter, UnknownLayer
+        """
+        value = check_scale(scale)
+        check_method(method)
+        bbox = check_bbox(bbox_lonlat) if bbox_lonlat is not None else None
+        info, _ = self.info(dataset)
+        if bbox is None:
+            fids = self.store.all_fids(dataset)
+        else:
+            xs, ys = lonlat_to_mercator(np.array([bbox.minx, bbox.maxx]), np.array([bbox.miny, bbox.maxy]))
+            fids = self.store.query(dataset, (xs[0], ys[0], xs[1], ys[1]))
+        recs = self.records(fids)
+        recs = [recs[i] for i in self._visible(recs, value, method)]
+        if not recs:
+            return []
+        ts = self._t_values(info, recs, value, None)
+        out = []
+        for rec, t in zip(recs, ts, strict=True):
+            if method == "ccsm":
+                xy = rec.base + float(t) * (rec.top - rec.base)
+                sim = float(np.interp(t, rec.sim_t, rec.sim))
+            elif method == "original":
+                xy, sim = rec.original, 1.0
+            else:
+                xy, xy_w = self._baseline(info, rec, method, value)
+                sim = float(similarity(rec.original_w, xy_w, rec.closed))
+            lon, lat = mercator_to_lonlat(xy[:, 0], xy[:, 1])
+            out.append(
+                SimplifiedContour(
+                    rec.fid, rec.contour_id, float(rec.elevation), round(float(t), T_DECIMALS), sim,
+                    np.column_stack([lon, lat]),
+                )
+            )
+        return out
+
+
+def feature_collection(contours: Sequence[SimplifiedContour], scale: float, method: str, decimals: int = 7) -> dict[str, Any]:
+    """A GeoJSON FeatureCollection (RFC 7946, EPSG:4326) of /simplify results."""
+    return {
+        "type": "FeatureCollection",
+        "features": [
+            {
+                "type": "Feature",
+                "id": c.fid,
+                "properties": {
+                    "id": c.contour_id,
+                    "elevation": c.elevation,
+                    "t": c.t,
+                    "similarity": round(c.similarity, 6),
+                    "scale": scale,
+                    "method": method,
+                },
+                "geometry": {"type": "LineString", "coordinates": np.round(c.coords_lonlat, decimals).tolist()},
+            }
+            for c in contours
+        ],
+    }

@@ -1,0 +1,587 @@
+"""The store: precomputed CCS grids, Sim(t) and t(scale) tables and dataset metadata in one SQLite file.
+
+- One file, stdlib ``sqlite3``, WAL mode: several processes read it at once while one writes.
+- Contour extents sit in an R*Tree (EPSG:3857), so a tile looks up only the contours it touches.
+- A dataset is written in **one transaction** (old rows out, new rows in, new ``data_version``): a build
+  killed at any moment leaves the previous content as it was; SQLite's journal undoes the partial write.
+- Each dataset records the content hash of its source and build parameters, so a changed source is rebuilt
+  and an unchanged one is served at once after a restart.
+
+Coordinates. ``base``/``top`` (the CCS rows) and the original contour are transformed once, at save time,
+from the working CRS (metres, e.g. UTM) to EPSG:3857, and the slice ``(1 - t) base + t top`` is then taken
+in EPSG:3857. Interpolating the two transformed rows instead of transforming the interpolated row differs by
+the projection's non-linearity over one link: a link joins two corresponding points at most a few hundred
+metres apart, and over such a distance UTM -> Web Mercator is affine up to terms of order
+(link / earth radius)² x link, i.e. (500 m / 6,378 km)² x 500 m ≈ 3e-6 m — far below a centimetre, and
+well below the tile grid (2.4 m at z16). The original coordinates in the working CRS are kept too, because
+the baseline simplifiers must run in metres of a conformal projected CRS.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import sqlite3
+import threading
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from engine.build import BuiltSet
+from engine.crs import WEB_MERCATOR, make_transformer
+from engine.errors import StoreError, UnknownLayer
+from engine.geometry import closed_path
+from engine.rowsig import row_significance
+from engine.types import BadFeature, Contour, Coords
+
+#: Bumped whenever the layout of the file changes; a store of another format is refused.
+STORE_FORMAT = 2
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS store_meta(key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS datasets(
+    id TEXT PRIMARY KEY,
+    name TEXT NOT NULL,
+    source TEXT NOT NULL,
+    source_hash TEXT NOT NULL,
+    params TEXT NOT NULL,
+    data_version INTEGER NOT NULL,
+    built_at REAL NOT NULL,
+    build_seconds REAL NOT NULL,
+    working_crs TEXT NOT NULL,
+    source_crs TEXT NOT NULL,
+    interval REAL,
+    minx REAL, miny REAL, maxx REAL, maxy REAL,
+    n_contours INTEGER NOT NULL,
+    n_closed INTEGER NOT NULL,
+    n_vertices INTEGER NOT NULL,
+    source_scale REAL NOT NULL,
+    target_scale REAL NOT NULL,
+    ladder BLOB NOT NULL,
+    bad_features TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS contours(
+    fid INTEGER PRIMARY KEY AUTOINCREMENT,
+    dataset TEXT NOT NULL,
+    contour_id TEXT NOT NULL,
+    elevation REAL NOT NULL,
+    closed INTEGER NOT NULL,
+    grp INTEGER NOT NULL,
+    vanish_scale REAL,
+    length_m REAL NOT NULL,
+    n_rows INTEGER NOT NULL,
+    n_input INTEGER NOT NULL,
+    base BLOB NOT NULL,
+    top BLOB NOT NULL,
+    original BLOB NOT NULL,
+    original_w BLOB NOT NULL,
+    t_at_scale BLOB NOT NULL,
+    sim_t BLOB NOT NULL,
+    sim BLOB NOT NULL,
+    sig BLOB NOT NULL,
+    sig_original BLOB NOT NULL
+);
+CREATE INDEX IF NOT EXISTS contours_dataset ON contours(dataset);
+CREATE VIRTUAL TABLE IF NOT EXISTS contour_rtree USING rtree(fid, minx, maxx, miny, maxy, +dataset TEXT);
+CREATE TABLE IF NOT EXISTS builds(
+    dataset TEXT PRIMARY KEY,
+    state TEXT NOT NULL,
+    done INTEGER NOT NULL,
+    total INTEGER NOT NULL,
+    error TEXT,
+    pid INTEGER NOT NULL,
+    host TEXT NOT NULL,
+    started REAL NOT NULL,
+    updated REAL NOT NULL
+);
+"""
+
+
+def source_hash(path: str | os.PathLike[str] | None, params: dict[str, Any], data: bytes | None = None) -> str:
+    """SHA-256 of a source's bytes (a file's content or ``data``), its build parameters and the store format."""
+    h = hashlib.sha256()
+    h.update(f"ccsm-store-{STORE_FORMAT}\n".encode())
+    h.update(json.dumps(params, sort_keys=True, default=str).encode())
+    if data is not None:
+        h.update(data)
+    elif path is not None:
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+    return h.hexdigest()
+
+
+@dataclass(frozen=True)
+class DatasetInfo:
+    """A stored dataset's metadata.
+
+    Attributes
+    ----------
+    bounds_3857
+        (minx, miny, maxx, maxy) of every contour's CCS, EPSG:3857 metres.
+    ladder
+        (S,) scale denominators at which each contour's t is tabulated.
+    data_version
+        Increases with every write of the dataset; tiles are deterministic given it.
+    """
+
+    id: str
+    name: str
+    source: str
+    source_hash: str
+    params: dict[str, Any]
+    data_version: int
+    built_at: float
+    build_seconds: float
+    working_crs: str
+    source_crs: str
+    interval: float | None
+    bounds_3857: tuple[float, float, float, float]
+    n_contours: int
+    n_closed: int
+    n_vertices: int
+    source_scale: float
+    target_scale: float
+    ladder: NDArray[np.float64]
+    bad_features: list[dict[str, Any]] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class ContourRecord:
+    """One stored contour, decoded: every array a tile or /simplify needs.
+
+    Attributes
+    ----------
+    fid
+        Stable integer id of the row (MVT feature id).
+    base, top
+        (M, 2) CCS rows in EPSG:3857 metres (a ring as a closed path).
+    original
+        (n, 2) input contour in EPSG:3857 (a ring as a closed path).
+    original_w
+        (n, 2) input contour in the working CRS, metres (a ring *without* its repeated vertex).
+    t_at_scale
+        (S,) t at each scale of the dataset's ladder.
+    sim_t, sim
+        The Sim(t) table.
+    sig, sig_original
+        (M,) and (n,) float32 significance of each row of base/top and of the original, EPSG:3857 metres
+        (:mod:`engine.rowsig`): a tile whose grid unit is u skips rows below u / 2.
+    """
+
+    fid: int
+    dataset: str
+    contour_id: str
+    elevation: float
+    closed: bool
+    group: int
+    vanish_scale: float
+    length_m: float
+    base: Coords
+    top: Coords
+    original: Coords
+    original_w: Coords
+    t_at_scale: NDArray[np.float64]
+    sim_t: NDArray[np.float64]
+    sim: NDArray[np.float64]
+    sig: NDArray[np.float32]
+    sig_original: NDArray[np.float32]
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held by the arrays."""
+        return int(self.base.nbytes + self.top.nbytes + self.original.nbytes + self.original_w.nbytes)
+
+
+@dataclass(frozen=True)
+class BuildStatus:
+    """Progress of a build in progress, or the error of a failed one (``state``: building or failed)."""
+
+    dataset: str
+    state: str
+    done: int
+    total: int
+    error: str | None
+    pid: int
+    host: str
+    started: float
+    updated: float
+
+
+def _blob(a: NDArray[np.float64]) -> bytes:
+    return np.ascontiguousarray(a, dtype="<f8").tobytes()
+
+
+def _array(b: bytes, cols: int = 0) -> NDArray[np.float64]:
+    a = np.frombuffer(b, dtype="<f8")
+    return a.reshape(-1, cols) if cols else a
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+class CCSStore:
+    """One SQLite store file. Thread-safe: each thread gets its own connection.
+
+    Parameters
+    ----------
+    path
+        The file; created (with its directory) if missing.
+    readonly
+        Open without creating or migrating (for a second process that only reads).
+
+    Raises
+    ------
+    StoreError
+        The file is not a ccsm store, is of another format, or cannot be opened.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], *, readonly: bool = False) -> None:
+        self.path = Path(path)
+        self.readonly = readonly
+        self._local = threading.local()
+        self._lock = threading.Lock()
+        if not readonly:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        elif not self.path.exists():
+            raise StoreError(f"store {self.path.name} does not exist")
+        try:
+            con = self._con()
+            if not readonly:
+                con.executescript(_SCHEMA)
+                row = con.execute("SELECT value FROM store_meta WHERE key='format'").fetchone()
+                if row is None:
+                    con.execute("INSERT OR IGNORE INTO store_meta VALUES ('format', ?)", (str(STORE_FORMAT),))
+                    con.execute("INSERT OR IGNORE INTO store_meta VALUES ('version_counter', '0')")
+                    con.commit()
+            row = con.execute("SELECT value FROM store_meta WHERE key='format'").fetchone()
+        except sqlite3.DatabaseError as exc:
+            raise StoreError(f"store {self.path.name} cannot be opened: {exc}") from exc
+        if row is None or int(row[0]) != STORE_FORMAT:
+            raise StoreError(
+                f"store {self.path.name} has format {row[0] if row else 'unknown'}, expected {STORE_FORMAT}"
+            )
+
+    # -- connections -------------------------------------------------------------------------------------
+    def _con(self) -> sqlite3.Connection:
+        con: sqlite3.Connection | None = getattr(self._local, "con", None)
+        if con is None:
+            uri = f"file:{self.path}?mode={'ro' if self.readonly else 'rwc'}"
+            con = sqlite3.connect(uri, uri=True, timeout=60.0, isolation_level=None, check_same_thread=False)
+            if not self.readonly:
+                con.execute("PRAGMA journal_mode=WAL")
+            # NORMAL is durable for WAL across application crashes (kill -9); only a power cut may lose the
+            # last commit, never corrupt the file.
+            con.execute("PRAGMA synchronous=NORMAL")
+            con.execute("PRAGMA busy_timeout=60000")
+            self._local.con = con
+        return con
+
+    @contextmanager
+    def _write(self) -> Iterator[sqlite3.Cursor]:
+        """One write transaction (BEGIN IMMEDIATE ... COMMIT, ROLLBACK on any exception)."""
+        con = self._con()
+        cur = con.cursor()
+        cur.execute("BEGIN IMMEDIATE")
+        try:
+            yield cur
+        except BaseException:
+            con.execute("ROLLBACK")
+            raise
+        con.execute("COMMIT")
+
+    def close(self) -> None:
+        """Close this thread's connection."""
+        con = getattr(self._local, "con", None)
+        if con is not None:
+            con.close()
+            self._local.con = None
+
+    # -- datasets ----------------------------------------------------------------------------------------
+    def dataset_ids(self) -> list[str]:
+        """Ids of the stored (ready) datasets, sorted."""
+        return [r[0] for r in self._con().execute("SELECT id FROM datasets ORDER BY id")]
+
+    def data_version(self, dataset: str) -> int | None:
+        """The dataset's current data_version, or None if it is not stored."""
+        row = self._con().execute("SELECT data_version FROM datasets WHERE id=?", (dataset,)).fetchone()
+        return None if row is None else int(row[0])
+
+    def source_hash_of(self, dataset: str) -> str | None:
+        """The stored source hash of a dataset, or None."""
+        row = self._con().execute("SELECT source_hash FROM datasets WHERE id=?", (dataset,)).fetchone()
+        return None if row is None else str(row[0])
+
+    def dataset(self, dataset: str) -> DatasetInfo:
+        """Metadata of a stored dataset.
+
+        Raises
+        ------
+        UnknownLayer
+            No dataset of that id is stored.
+        """
+        con = self._con()
+        con.row_factory = sqlite3.Row
+        try:
+            row = con.execute("SELECT * FROM datasets WHERE id=?", (dataset,)).fetchone()
+        finally:
+            con.row_factory = None
+        if row is None:
+            raise UnknownLayer(f"unknown dataset {dataset!r}")
+        return DatasetInfo(
+            id=row["id"],
+            name=row["name"],
+            source=row["source"],
+            source_hash=row["source_hash"],
+            params=json.loads(row["params"]),
+            data_version=int(row["data_version"]),
+            built_at=float(row["built_at"]),
+            build_seconds=float(row["build_seconds"]),
+            working_crs=row["working_crs"],
+            source_crs=row["source_crs"],
+            interval=row["interval"],
+            bounds_3857=(row["minx"], row["miny"], row["maxx"], row["maxy"]),
+            n_contours=int(row["n_contours"]),
+            n_closed=int(row["n_closed"]),
+            n_vertices=int(row["n_vertices"]),
+            source_scale=float(row["source_scale"]),
+            target_scale=float(row["target_scale"]),
+            ladder=_array(row["ladder"]),
+            bad_features=json.loads(row["bad_features"]),
+        )
+
+    def save(
+        self,
+        dataset: str,
+        built: BuiltSet,
+        contours: Sequence[Contour],
+        *,
+        name: str,
+        source: str,
+        source_hash: str,
+        params: dict[str, Any],
+        build_seconds: float = 0.0,
+        progress: Callable[[int, int], None] | None = None,
+    ) -> DatasetInfo:
+        """Write a built dataset, replacing any previous version, in one transaction.
+
+        ``contours`` are the input contours the set was built from (their working-CRS coordinates are stored
+        for method=original and the baselines).
+
+        The transformation to EPSG:3857 happens before the transaction starts; inside it, the old rows are
+        deleted and the new ones inserted. An exception (or a killed process) before COMMIT leaves the
+        previous version untouched.
+        """
+        to_3857 = make_transformer(built.working_crs, WEB_MERCATOR)
+        originals = {(c.id, float(c.elevation), c.n_vertices): c.coords for c in contours}
+        rows: list[tuple[Any, ...]] = []
+        boxes: list[tuple[float, float, float, float]] = []
+        n_vertices = 0
+        for ccs in built.surfaces:
+            both = to_3857(np.concatenate([ccs.base, ccs.top]))
+            m = len(ccs.base)
+            base, top = both[:m], both[m:]
+            key = (ccs.contour_id, float(ccs.elevation), int(ccs.n_input_vertices))
+            if key not in originals:
+                raise StoreError(f"contour {ccs.contour_id!r}: its input coordinates were not passed to save()")
+            original_w = np.asarray(originals[key], dtype=np.float64)
+            original = to_3857(closed_path(original_w) if ccs.closed else original_w)
+            if not (np.isfinite(both).all() and np.isfinite(original).all()):
+                continue
+            allxy = np.concatenate([both, original])
+            lo, hi = allxy.min(axis=0), allxy.max(axis=0)
+            boxes.append((float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])))
+            n_vertices += len(original_w)
+            rows.append(
+                (
+                    dataset,
+                    str(ccs.contour_id),
+                    float(ccs.elevation),
+                    int(ccs.closed),
+                    int(ccs.group),
+                    None if math.isinf(ccs.vanish_scale) else float(ccs.vanish_scale),
+                    float(ccs.length_m),
+                    m,
+                    int(ccs.n_input_vertices),
+                    _blob(base),
+                    _blob(top),
+                    _blob(original),
+                    _blob(original_w),
+                    _blob(ccs.t_at_scale),
+                    _blob(ccs.sim_t),
+                    _blob(ccs.sim),
+                    row_significance(base, top).astype("<f4").tobytes(),
+                    row_significance(original).astype("<f4").tobytes(),
+                )
+            )
+        if boxes:
+            arr = np.array(boxes)
+            bounds = (float(arr[:, 0].min()), float(arr[:, 2].min()), float(arr[:, 1].max()), float(arr[:, 3].max()))
+        else:
+            bounds = (0.0, 0.0, 0.0, 0.0)
+        bad = [_bad_dict(b) for b in built.bad_features]
+        with self._write() as cur:
+            self._delete_rows(cur, dataset)
+            counter = int(cur.execute("SELECT value FROM store_meta WHERE key='version_counter'").fetchone()[0]) + 1
+            cur.execute("UPDATE store_meta SET value=? WHERE key='version_counter'", (str(counter),))
+            cur.execute(
+                "INSERT INTO datasets VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                (
+                    dataset,
+                    name,
+                    source,
+                    source_hash,
+                    json.dumps(params, sort_keys=True, default=str),
+                    counter,
+                    time.time(),
+                    float(build_seconds),
+                    built.working_crs,
+                    built.source_crs,
+                    None if built.interval is None else float(built.interval),
+                    *bounds,
+                    len(rows),
+                    sum(r[3] for r in rows),
+                    n_vertices,
+                    float(built.model.source_scale),
+                    float(built.model.target_scale),
+                    _blob(np.asarray(built.model.ladder, dtype=np.float64)),
+                    json.dumps(bad),
+                ),
+            )
+            step = 256
+            for i in range(0, len(rows), step):
+                chunk = rows[i : i + step]
+                for row, box in zip(chunk, boxes[i : i + step], strict=True):
+                    cur.execute(
+                        "INSERT INTO contours(dataset, contour_id, elevation, closed, grp, vanish_scale, "
+                        "length_m, n_rows, n_input, base, top, original, original_w, t_at_scale, sim_t, sim, sig, "
+                        "sig_original) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                        row,
+                    )
+                    cur.execute("INSERT INTO contour_rtree VALUES (?,?,?,?,?,?)", (cur.lastrowid, *box, dataset))
+                if progress:
+                    progress(min(i + step, len(rows)), len(rows))
+            cur.execute("DELETE FROM builds WHERE dataset=?", (dataset,))
+        return self.dataset(dataset)
+
+    @staticmethod
+    def _delete_rows(cur: sqlite3.Cursor, dataset: str) -> None:
+        cur.execute("DELETE FROM contour_rtree WHERE fid IN (SELECT fid FROM contours WHERE dataset=?)", (dataset,))
+        cur.execute("DELETE FROM contours WHERE dataset=?", (dataset,))
+        cur.execute("DELETE FROM datasets WHERE id=?", (dataset,))
+
+    def delete(self, dataset: str) -> bool:
+        """Remove a dataset and its build status; True if it was stored."""
+        with self._write() as cur:
+            existed = cur.execute("SELECT 1 FROM datasets WHERE id=?", (dataset,)).fetchone() is not None
+            self._delete_rows(cur, dataset)
+            cur.execute("DELETE FROM builds WHERE dataset=?", (dataset,))
+        return existed
+
+    # -- contours ----------------------------------------------------------------------------------------
+    def query(self, dataset: str, bounds_3857: Sequence[float]) -> list[int]:
+        """fids of the dataset's contours whose extent meets an EPSG:3857 rectangle (R*Tree lookup)."""
+        minx, miny, maxx, maxy = (float(v) for v in bounds_3857)
+        # The dataset is an auxiliary column of the R*Tree: filtered after the spatial search, so the cost
+        # follows the contours near the rectangle, not the size of the store.
+        cur = self._con().execute(
+            "SELECT fid FROM contour_rtree WHERE maxx >= ? AND minx <= ? AND maxy >= ? AND miny <= ? "
+            "AND dataset = ?",
+            (minx, maxx, miny, maxy, dataset),
+        )
+        return sorted(r[0] for r in cur)
+
+    def all_fids(self, dataset: str) -> list[int]:
+        """Every contour fid of a dataset, in input order."""
+        return [r[0] for r in self._con().execute("SELECT fid FROM contours WHERE dataset=? ORDER BY fid", (dataset,))]
+
+    def load(self, fids: Sequence[int]) -> list[ContourRecord]:
+        """Decode contour rows by fid (in the order given; unknown fids are skipped)."""
+        out: dict[int, ContourRecord] = {}
+        con = self._con()
+        for i in range(0, len(fids), 500):
+            chunk = list(fids[i : i + 500])
+            marks = ",".join("?" * len(chunk))
+            for r in con.execute(
+                "SELECT fid, dataset, contour_id, elevation, closed, grp, vanish_scale, length_m, base, top, "
+                f"original, original_w, t_at_scale, sim_t, sim, sig, sig_original FROM contours "
+                f"WHERE fid IN ({marks})",
+                chunk,
+            ):
+                out[r[0]] = ContourRecord(
+                    fid=r[0],
+                    dataset=r[1],
+                    contour_id=r[2],
+                    elevation=r[3],
+                    closed=bool(r[4]),
+                    group=r[5],
+                    vanish_scale=math.inf if r[6] is None else float(r[6]),
+                    length_m=r[7],
+                    base=_array(r[8], 2),
+                    top=_array(r[9], 2),
+                    original=_array(r[10], 2),
+                    original_w=_array(r[11], 2),
+                    t_at_scale=_array(r[12]),
+                    sim_t=_array(r[13]),
+                    sim=_array(r[14]),
+                    sig=np.frombuffer(r[15], dtype="<f4"),
+                    sig_original=np.frombuffer(r[16], dtype="<f4"),
+                )
+        return [out[f] for f in fids if f in out]
+
+    # -- build status ------------------------------------------------------------------------------------
+    def set_build_status(self, dataset: str, state: str, done: int = 0, total: int = 0, error: str | None = None) -> None:
+        """Record a build's progress (visible to every process reading the store)."""
+        now = time.time()
+        with self._write() as cur:
+            row = cur.execute("SELECT started FROM builds WHERE dataset=?", (dataset,)).fetchone()
+            started = now if row is None or state == "building" and done == 0 else row[0]
+            cur.execute(
+                "INSERT OR REPLACE INTO builds VALUES (?,?,?,?,?,?,?,?,?)",
+                (dataset, state, done, total, error, os.getpid(), _host(), started, now),
+            )
+
+    def clear_build_status(self, dataset: str) -> None:
+        """Forget a dataset's build status."""
+        with self._write() as cur:
+            cur.execute("DELETE FROM builds WHERE dataset=?", (dataset,))
+
+    def build_statuses(self) -> dict[str, BuildStatus]:
+        """Every recorded build; a 'building' entry whose process is gone is reported as failed."""
+        out = {}
+        for r in self._con().execute("SELECT * FROM builds"):
+            status = BuildStatus(*r)
+            if status.state == "building" and status.host == _host() and not _pid_alive(status.pid):
+                status = BuildStatus(
+                    status.dataset, "failed", status.done, status.total, "the build was interrupted",
+                    status.pid, status.host, status.started, status.updated,
+                )
+            out[status.dataset] = status
+        return out
+
+    def integrity_ok(self) -> bool:
+        """SQLite's own integrity check of the file."""
+        return self._con().execute("PRAGMA integrity_check").fetchone()[0] == "ok"
+
+
+def _host() -> str:
+    return os.uname().nodename if hasattr(os, "uname") else "localhost"
+
+
+def _bad_dict(b: BadFeature) -> dict[str, Any]:
+    return {"id": b.id if isinstance(b.id, int) else str(b.id), "reason": b.reason, "where": b.where}

@@ -1,0 +1,232 @@
+"""Web Mercator tile math, quantisation to the tile grid and clipping (the mercantile conventions).
+
+Tiles are XYZ (``y = 0`` at the north edge), EPSG:3857 metres. A tile's grid has ``extent`` units per side
+(4096 by default), y pointing down as MVT wants it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import numpy as np
+import shapely
+from numpy.typing import NDArray
+
+from engine.errors import InvalidParameter, TileOutOfRange
+
+#: Half the width of the Web Mercator square, metres (pi x 6378137).
+HALF_WORLD_M = math.pi * 6378137.0
+#: Largest tile zoom any request may name (the tile matrix of z 30 already has 1e9 columns).
+MAX_TILE_ZOOM = 30
+#: Web Mercator's latitude limit, degrees.
+MAX_LATITUDE_DEG = 85.0511287798066
+
+
+class Tile(NamedTuple):
+    """An XYZ tile index: zoom ``z``, column ``x`` (west to east), row ``y`` (north to south)."""
+
+    z: int
+    x: int
+    y: int
+
+
+class Bounds(NamedTuple):
+    """(minx, miny, maxx, maxy) rectangle; units as stated where it is used (EPSG:3857 metres or degrees)."""
+
+    minx: float
+    miny: float
+    maxx: float
+    maxy: float
+
+
+def check_tile(z: int, x: int, y: int, min_zoom: int = 0, max_zoom: int = MAX_TILE_ZOOM) -> Tile:
+    """Validate a tile index against its zoom's tile matrix and the served zoom range.
+
+    >>> check_tile(1, 1, 0)
+    Tile(z=1, x=1, y=0)
+
+    Raises
+    ------
+    TileOutOfRange
+        ``z`` outside [min_zoom, max_zoom], or ``x``/``y`` outside [0, 2^z - 1]; the message names the value.
+    """
+    if not min_zoom <= z <= max_zoom:
+        raise TileOutOfRange(f"zoom {z} is outside the served range [{min_zoom}, {max_zoom}]")
+    n = 1 << z
+    if not 0 <= x < n:
+        raise TileOutOfRange(f"x {x} is outside [0, {n - 1}] at zoom {z}")
+    if not 0 <= y < n:
+        raise TileOutOfRange(f"y {y} is outside [0, {n - 1}] at zoom {z}")
+    return Tile(z, x, y)
+
+
+def check_fractional_zoom(z: int, zoom: float | None) -> float:
+    """The zoom a tile is drawn at: ``zoom`` if given (it must lie in [z, z + 1)), else ``z``.
+
+    Raises
+    ------
+    InvalidParameter
+        ``zoom`` is not finite or outside [z, z + 1).
+    """
+    if zoom is None:
+        return float(z)
+    value = float(zoom)
+    if not math.isfinite(value) or not z <= value < z + 1:
+        raise InvalidParameter(f"zoom {zoom} must lie in [{z}, {z + 1}) for a tile of zoom {z}")
+    return value
+
+
+def tile_bounds(tile: Tile) -> Bounds:
+    """EPSG:3857 bounds of a tile, metres.
+
+    >>> tile_bounds(Tile(0, 0, 0)).maxx == HALF_WORLD_M
+    True
+    """
+    size = 2 * HALF_WORLD_M / (1 << tile.z)
+    minx = -HALF_WORLD_M + tile.x * size
+    maxy = HALF_WORLD_M - tile.y * size
+    return Bounds(minx, maxy - size, minx + size, maxy)
+
+
+def buffered(bounds: Bounds, buffer_px: int, extent: int) -> Bounds:
+    """The tile bounds grown by ``buffer_px`` grid units on each side (same units as ``bounds``)."""
+    pad = (bounds.maxx - bounds.minx) * buffer_px / extent
+    return Bounds(bounds.minx - pad, bounds.miny - pad, bounds.maxx + pad, bounds.maxy + pad)
+
+
+def tile_center_latitude(tile: Tile) -> float:
+    """Latitude of a tile's centre, degrees (the latitude its map scale is computed at)."""
+    n = 1 << tile.z
+    return math.degrees(math.atan(math.sinh(math.pi * (1 - 2 * (tile.y + 0.5) / n))))
+
+
+def mercator_to_lonlat(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """EPSG:3857 metres to longitude/latitude degrees (spherical formulas, exact for Web Mercator)."""
+    lon = np.degrees(np.asarray(x, dtype=float) / 6378137.0)
+    lat = np.degrees(np.arctan(np.sinh(np.asarray(y, dtype=float) / 6378137.0)))
+    return lon, lat
+
+
+def lonlat_to_mercator(lon: NDArray[np.float64], lat: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Longitude/latitude degrees to EPSG:3857 metres (latitude clamped to Web Mercator's range)."""
+    lat_c = np.clip(np.asarray(lat, dtype=float), -MAX_LATITUDE_DEG, MAX_LATITUDE_DEG)
+    x = np.radians(np.asarray(lon, dtype=float)) * 6378137.0
+    y = np.log(np.tan(np.pi / 4 + np.radians(lat_c) / 2)) * 6378137.0
+    return x, y
+
+
+def tiles_covering(bounds_3857: Bounds, z: int) -> list[Tile]:
+    """Every tile of zoom ``z`` that intersects an EPSG:3857 rectangle, row by row."""
+    n = 1 << z
+    size = 2 * HALF_WORLD_M / n
+
+    def col(v: float) -> int:
+        return min(n - 1, max(0, int(math.floor((v + HALF_WORLD_M) / size))))
+
+    def row(v: float) -> int:
+        return min(n - 1, max(0, int(math.floor((HALF_WORLD_M - v) / size))))
+
+    x0, x1 = col(bounds_3857.minx), col(bounds_3857.maxx)
+    y0, y1 = row(bounds_3857.maxy), row(bounds_3857.miny)
+    return [Tile(z, x, y) for y in range(y0, y1 + 1) for x in range(x0, x1 + 1)]
+
+
+def quantize(coords: NDArray[np.float64], bounds: Bounds, extent: int) -> NDArray[np.int64]:
+    """EPSG:3857 coordinates to integer tile-grid coordinates, y down: (n, 2) int64.
+
+    >>> b = Bounds(0.0, 0.0, 4096.0, 4096.0)
+    >>> quantize(np.array([[0.0, 4096.0], [10.4, 0.0]]), b, 4096).tolist()
+    [[0, 0], [10, 4096]]
+    """
+    k = extent / (bounds.maxx - bounds.minx)
+    out = np.empty(coords.shape, dtype=np.int64)
+    np.rint((coords[:, 0] - bounds.minx) * k, out=out[:, 0], casting="unsafe")
+    np.rint((bounds.maxy - coords[:, 1]) * k, out=out[:, 1], casting="unsafe")
+    return out
+
+
+def drop_repeats(q: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Drop consecutive duplicate rows of integer coordinates (the first of each run stays)."""
+    if len(q) < 2:
+        return q
+    keep = np.empty(len(q), dtype=bool)
+    keep[0] = True
+    np.any(q[1:] != q[:-1], axis=1, out=keep[1:])
+    return q if keep.all() else q[keep]
+
+
+def clip_to_grid(q: NDArray[np.int64], lo: int, hi: int) -> list[NDArray[np.int64]]:
+    """Clip an integer polyline to the square [lo, hi]²; returns its pieces (each >= 2 distinct points).
+
+    Lines wholly inside come back unchanged without touching shapely; the rest go through
+    ``shapely.clip_by_rect`` and are rounded back to the grid.
+    """
+    if len(q) < 2:
+        return []
+    if q.min() >= lo and q.max() <= hi:
+        return [q]
+    mins = q.min(axis=0)
+    maxs = q.max(axis=0)
+    if mins[0] > hi or mins[1] > hi or maxs[0] < lo or maxs[1] < lo:
+        return []
+    clipped = shapely.clip_by_rect(shapely.linestrings(q.astype(np.float64)), lo, lo, hi, hi)
+    pieces = []
+    for part in shapely.get_parts(clipped):
+        if shapely.get_type_id(part) != 1:  # a point where the line only touches the rectangle
+            continue
+        xy = drop_repeats(np.rint(shapely.get_coordinates(part)).astype(np.int64))
+        if len(xy) >= 2:
+            pieces.append(xy)
+    return pieces
+
+
+#: Rows per chunk of a line's own spatial index: a tile touching a long contour slices only the chunks it
+#: meets, so the work per tile follows what the tile shows, not the length of the contours it touches.
+CHUNK_ROWS = 32
+
+
+def chunk_bounds(rows: Sequence[NDArray[np.float64]], size: int = CHUNK_ROWS) -> NDArray[np.float64]:
+    """(C, 4) (minx, miny, maxx, maxy) of each chunk of rows [c*size, (c+1)*size] over several (M, 2) arrays.
+
+    Consecutive chunks share one row, so a run of chunks is a connected piece of the line. With the CCS's
+    ``base`` and ``top`` rows as input, every slice at any t lies inside the boxes (a slice point is a convex
+    combination of the two rows' points).
+    """
+    m = len(rows[0])
+    starts = np.arange(0, max(m - 1, 1), size)
+    nxt = np.minimum(starts + size, m - 1)
+    lo = np.full((len(starts), 2), np.inf)
+    hi = np.full((len(starts), 2), -np.inf)
+    for r in rows:
+        lo = np.minimum(lo, np.minimum(np.minimum.reduceat(r, starts, axis=0), r[nxt]))
+        hi = np.maximum(hi, np.maximum(np.maximum.reduceat(r, starts, axis=0), r[nxt]))
+    return np.column_stack([lo, hi])
+
+
+def row_runs(chunks: NDArray[np.float64], box: Bounds, m: int, size: int = CHUNK_ROWS) -> list[tuple[int, int]]:
+    """Row ranges [a, b) of the chunks that meet ``box``, consecutive chunks merged."""
+    hit = (chunks[:, 2] >= box.minx) & (chunks[:, 0] <= box.maxx) & (chunks[:, 3] >= box.miny) & (chunks[:, 1] <= box.maxy)
+    if hit.all():
+        return [(0, m)]
+    idx = np.flatnonzero(hit)
+    if len(idx) == 0:
+        return []
+    cut = np.flatnonzero(np.diff(idx) > 1)
+    firsts = np.concatenate([idx[:1], idx[cut + 1]])
+    lasts = np.concatenate([idx[cut], idx[-1:]])
+    return [(int(a) * size, min((int(b) + 1) * size + 1, m)) for a, b in zip(firsts, lasts, strict=True)]
+
+
+def collinear_free(rows: NDArray[np.float64], rel_tol: float = 1e-9) -> NDArray[np.intp]:
+    """Indices of the rows of a polyline that are not inside a straight run (both ends always kept)."""
+    if len(rows) <= 2:
+        return np.arange(len(rows))
+    d = np.diff(rows, axis=0)
+    a, b = d[:-1], d[1:]
+    cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    dot = (a * b).sum(axis=1)
+    scale = np.hypot(*a.T) * np.hypot(*b.T)
+    turn = (np.abs(cross) > rel_tol * scale) | (dot <= 0)
+    return np.concatenate([[0], np.flatnonzero(turn) + 1, [len(rows) - 1]])
