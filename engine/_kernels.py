@@ -92,7 +92,8 @@ def discrete_frechet(p: np.ndarray, q: np.ndarray, bound: float) -> float:  # pr
     inf = np.inf
     prev = np.full(m, inf)
     cur = np.full(m, inf)
-    b2 = bound * bound if bound < inf else inf
+    # A hair of slack so that the exact distance itself, squared with rounding, still counts as within bound.
+    b2 = bound * bound * (1.0 + 1e-9) + 1e-18 if bound < inf else inf
     lo_prev = 0
     hi_prev = -1
     for i in range(n):

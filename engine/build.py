@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from engine.ccs import CCS, build_ccs, slice_area
+from engine.ccs import CCS, build_ccs, check_contour, slice_area
 from engine.errors import CCSMError
 from engine.params import BuildParams
 from engine.regression import ScaleModel, fit_scale_model
@@ -137,7 +137,16 @@ def build_contour_set(
         Contours that could not be built are listed in ``bad_features`` with the reason; the rest are built.
     """
     params = params or BuildParams()
-    contours = contour_set.contours
+    # Check every contour first: one unusable contour must not break the grouping of the others.
+    contours = []
+    rejected: list[BadFeature] = []
+    for contour in contour_set.contours:
+        try:
+            check_contour(contour)
+        except CCSMError as exc:
+            rejected.append(BadFeature(contour.id, str(exc)))
+        else:
+            contours.append(contour)
     model, labels = fit_scale_model(contours, params)
     workers = default_workers() if workers is None else max(1, workers)
     chunks = [
@@ -145,7 +154,7 @@ def build_contour_set(
     ]
     results: list[CCS | BadFeature] = []
     done = 0
-    total = len(contours)
+    total = len(contours)  # contours that passed the check; the rejected ones are reported, not built
     if progress:
         progress(0, total)
     if workers == 1 or len(chunks) <= 1:
@@ -170,7 +179,7 @@ def build_contour_set(
         with threadpool_limits(1):
             repaired = resolve_crossings(built_pairs, labels_of(contours, labels, built_pairs), params, model)
     surfaces = [r for _, r in built_pairs]
-    bad = list(contour_set.bad_features) + [r for r in results if isinstance(r, BadFeature)]
+    bad = list(contour_set.bad_features) + rejected + [r for r in results if isinstance(r, BadFeature)]
     return BuiltSet(
         surfaces=surfaces,
         model=model,
@@ -190,7 +199,9 @@ REPAIR_FACTORS = (0.5, 0.25, 0.125, 0.0)
 CHECK_EVERY = 4
 
 
-def labels_of(contours: Sequence[Contour], labels: np.ndarray, pairs: Sequence[tuple[Contour, CCS]]) -> list[int]:
+def labels_of(
+    contours: Sequence[Contour], labels: np.ndarray, pairs: Sequence[tuple[Contour, CCS]]
+) -> list[int]:
     """Group label of each built contour."""
     index = {id(c): i for i, c in enumerate(contours)}
     return [int(labels[index[id(c)]]) for c, _ in pairs]
@@ -256,7 +267,9 @@ def resolve_crossings(
                 changed.add(i)
                 rebuilt_now.add(i)
         # Only the rebuilt contours can have made new crossings (or still have old ones).
-        involved = find_new_crossings([s for _, s in pairs], model, allowed, rebuilt_now) if rebuilt_now else set()
+        involved = (
+            find_new_crossings([s for _, s in pairs], model, allowed, rebuilt_now) if rebuilt_now else set()
+        )
     return len(changed)
 
 

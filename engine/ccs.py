@@ -15,9 +15,9 @@ from engine.errors import InvalidContour
 from engine.geometry import closed_path, path_length, ring_area
 from engine.params import BuildParams
 from engine.resample import correspond
+from engine.similarity import SimilarityReference
 from engine.simplify import douglas_peucker, douglas_peucker_count
 from engine.slicing import ccs_mesh, check_t, slice_rows
-from engine.similarity import SimilarityReference
 from engine.surface import CCSurface, fit_surface, tessellation_parameters
 from engine.types import Contour, Coords, FeatureId
 
@@ -77,8 +77,8 @@ class CCS:
         """Sim(L0, slice(t)), interpolated from the table."""
         return float(np.interp(check_t(t), self.sim_t, self.sim))
 
-    def mesh(self, heights: int = 4):  # type: ignore[no-untyped-def]
-        """The CCS-mesh as a ``trimesh.Trimesh`` in (x, y, t)."""
+    def mesh(self, heights: int | None = None):  # type: ignore[no-untyped-def]
+        """The CCS-mesh as a ``trimesh.Trimesh`` in (x, y, t) (rows in t: see ``engine.slicing.mesh_rows``)."""
         return ccs_mesh(self.base, self.top, heights)
 
     @property

@@ -36,7 +36,9 @@ def ring_area(coords: Coords) -> float:
     >>> ring_area(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]]))
     2.0
     """
-    x, y = coords[:, 0], coords[:, 1]
+    # Relative to the first vertex: at UTM magnitudes the raw products cancel and lose the small ring's area.
+    local = coords - coords[0]
+    x, y = local[:, 0], local[:, 1]
     return float(abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))) / 2.0)
 
 

@@ -174,7 +174,9 @@ def reference_sets(
     return sets
 
 
-def reference_similarities(reference: Contour, scales: NDArray[np.float64], params: BuildParams) -> NDArray[np.float64]:
+def reference_similarities(
+    reference: Contour, scales: NDArray[np.float64], params: BuildParams
+) -> NDArray[np.float64]:
     """Sim(L0, DP(L0, 0.1 mm x S)) of one reference contour at each scale S."""
     probe = SimilarityReference.of(reference.coords, reference.closed, params.similarity_spacing_m)
     sims = []

@@ -44,9 +44,7 @@ def discrete_frechet_distance(p: Coords, q: Coords) -> float:
     q = np.ascontiguousarray(q, dtype=np.float64)
     if len(p) == 0 or len(q) == 0:
         raise InvalidParameter("discrete Fréchet needs non-empty point sequences")
-    # A hair above the bound so rounding cannot push the bounding coupling itself out of the band.
-    bound = _diagonal_bound(p, q) * (1 + 1e-12) + 1e-12
-    return float(discrete_frechet(p, q, bound))
+    return float(discrete_frechet(p, q, _diagonal_bound(p, q)))
 
 
 def resample_count(

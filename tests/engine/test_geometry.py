@@ -104,11 +104,6 @@ def test_resample_by_arclength_rejects_fewer_than_two_points(n: int) -> None:
         resample_by_arclength(np.array([[0.0, 0.0], [1.0, 0.0]]), n)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="engine/geometry.py ring_area takes the shoelace of raw coordinates: at UTM-sized coordinates "
-    "(x ~ 7.5e5, y ~ 4.06e6) the products ~3e12 cancel, so a 10 cm square comes out 0.009765625 m², not 0.01",
-)
 def test_ring_area_is_accurate_for_a_small_ring_far_from_the_origin() -> None:
     square = np.array([[750_000.0, 4_060_000.0]]) + np.array([[0.0, 0.0], [0.1, 0.0], [0.1, 0.1], [0.0, 0.1]])
     assert ring_area(square) == pytest.approx(0.01, rel=1e-6)

@@ -101,12 +101,6 @@ def test_frechet_kernel_returns_inf_when_the_bound_is_below_the_distance(
     assert discrete_frechet(p, q, expected * factor) == math.inf
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="discrete_frechet compares squared distances with bound**2; sqrt(13)**2 rounds to "
-    "12.999999999999998 < 13, so a bound equal to the exact distance (a valid upper bound per the "
-    "docstring) yields inf",
-)
 def test_frechet_kernel_accepts_the_exact_distance_as_its_bound() -> None:
     p = np.array([[0.0, 0.0]])
     q = np.array([[2.0, 3.0]])

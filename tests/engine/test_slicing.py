@@ -101,7 +101,7 @@ def test_slice_distance_to_the_target_shrinks_monotonically_with_t(
 
 @pytest.mark.parametrize("t", [1.0 / 3.0, 2.0 / 3.0])
 def test_ring_slice_equals_trimesh_section_at_mesh_row_heights(t: float, ring_ccs: CCS) -> None:
-    sections = section_with_trimesh(ring_ccs.mesh(), t)
+    sections = section_with_trimesh(ccs_mesh(ring_ccs.base, ring_ccs.top, heights=4), t)
     assert len(sections) == 1
     ours = shapely.LineString(slice_rows(ring_ccs.base, ring_ccs.top, t))
     assert shapely.hausdorff_distance(shapely.LineString(sections[0]), ours) < 1e-6
@@ -129,25 +129,19 @@ def test_line_slice_is_within_the_diagonal_twist_of_trimeshs_section_segments(
     assert distance <= twist_bound(line_ccs.base, line_ccs.top, t, 4) + 1e-6
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="engine/slicing.py section_with_trimesh returns section.discrete, which trimesh builds from "
-    "Path.paths = closed paths only: the section of an open contour's CCS-mesh is dropped and [] returned",
-)
 def test_section_with_trimesh_returns_the_section_of_an_open_line(line_ccs: CCS) -> None:
     assert len(section_with_trimesh(line_ccs.mesh(), 0.5)) == 1
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="engine/slicing.py claims the closed form is exact for the CCS-mesh, but ccs_mesh splits every "
-    "quad by a diagonal; between mesh rows trimesh's section bends through the diagonals, metres off the "
-    "iso-t line (2.85 m on this ellipse at t = 0.5, heights = 4), not within a few centimetres",
-)
-@pytest.mark.parametrize("t", [0.5])
-def test_ring_slice_matches_trimesh_section_within_5_cm_strictly_inside(t: float, ring_ccs: CCS) -> None:
-    sections = section_with_trimesh(ring_ccs.mesh(), t)
-    ours = shapely.LineString(slice_rows(ring_ccs.base, ring_ccs.top, t))
+@pytest.mark.parametrize("t", [0.0137, 0.5003, 0.9871])
+@pytest.mark.parametrize("shape", ["ring", "line"])
+def test_slice_matches_trimesh_section_of_the_default_mesh_within_5_cm_strictly_inside(
+    t: float, shape: str, ring_ccs: CCS, line_ccs: CCS
+) -> None:
+    ccs = ring_ccs if shape == "ring" else line_ccs
+    sections = section_with_trimesh(ccs.mesh(), t)
+    assert len(sections) == 1
+    ours = shapely.LineString(slice_rows(ccs.base, ccs.top, t))
     assert shapely.hausdorff_distance(shapely.LineString(sections[0]), ours) < 0.05
 
 
