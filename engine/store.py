@@ -585,3 +585,101 @@ def _host() -> str:
 
 def _bad_dict(b: BadFeature) -> dict[str, Any]:
     return {"id": b.id if isinstance(b.id, int) else str(b.id), "reason": b.reason, "where": b.where}
+
+
+@dataclass(frozen=True)
+class SourceSpec:
+    """A source to build into the store and how to read it.
+
+    Attributes
+    ----------
+    path
+        Contour file or DEM (anything :func:`engine.io.read_source` reads).
+    dataset
+        Dataset id in the store (``[a-z0-9_-]``).
+    name
+        Human name.
+    elevation_field, interval
+        Passed to ``read_source`` (a DEM needs ``interval``).
+    source_scale, target_scale
+        Scale denominators of t = 0 and t = 1.
+    """
+
+    path: Path
+    dataset: str
+    name: str
+    elevation_field: str | None = None
+    interval: float | None = None
+    source_scale: float = 50_000.0
+    target_scale: float = 500_000.0
+
+    def params(self) -> dict[str, Any]:
+        """The parameters that decide the build (part of the content hash)."""
+        return {
+            "elevation_field": self.elevation_field,
+            "interval": self.interval,
+            "source_scale": self.source_scale,
+            "target_scale": self.target_scale,
+        }
+
+
+def slugify(text: str) -> str:
+    """A dataset id from a name: lowercase letters, digits, ``_`` and ``-``.
+
+    >>> slugify("Jacksboro Contours 20m.geojson")
+    'jacksboro-contours-20m-geojson'
+    """
+    out = "".join(c if c.isalnum() or c in "_-" else "-" for c in text.lower().strip())
+    while "--" in out:
+        out = out.replace("--", "-")
+    return out.strip("-")[:64] or "dataset"
+
+
+def is_current(store: CCSStore, spec: SourceSpec) -> bool:
+    """True when the store holds ``spec``'s dataset built from the same bytes and parameters."""
+    stored = store.source_hash_of(spec.dataset)
+    return stored is not None and stored == source_hash(spec.path, spec.params())
+
+
+def build_dataset(
+    store: CCSStore,
+    spec: SourceSpec,
+    *,
+    workers: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    force: bool = False,
+) -> tuple[DatasetInfo, bool]:
+    """Read, build and store one source unless the store already holds it unchanged.
+
+    Returns
+    -------
+    (info, rebuilt)
+        The stored dataset and whether it was (re)built now.
+
+    Raises
+    ------
+    SourceError, InvalidParameter
+        The source cannot be read or the parameters are invalid; the store is left as it was.
+    """
+    from engine.build import build_contour_set
+    from engine.io import read_source
+    from engine.params import BuildParams
+
+    digest = source_hash(spec.path, spec.params())
+    if not force and store.source_hash_of(spec.dataset) == digest:
+        return store.dataset(spec.dataset), False
+    started = time.perf_counter()
+    params = BuildParams(source_scale=spec.source_scale, target_scale=spec.target_scale)
+    contour_set = read_source(spec.path, elevation_field=spec.elevation_field, interval=spec.interval)
+    built = build_contour_set(contour_set, params, workers=workers, progress=progress)
+    info = store.save(
+        spec.dataset,
+        built,
+        contour_set.contours,
+        name=spec.name,
+        source=spec.path.name,
+        source_hash=digest,
+        params=spec.params(),
+        build_seconds=time.perf_counter() - started,
+    )
+    return info, True

@@ -1,1 +1,137 @@
 """``ccsm serve`` and ``ccsm build`` (owned by the tile service work)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from app.cli import app
+
+SourcesArg = Annotated[
+    list[Path] | None,
+    typer.Argument(help="Contour files (GeoJSON, GeoPackage, Shapefile) or DEMs (GeoTIFF, .asc, .npz); "
+                        "none = the bundled sample."),
+]
+StoreOpt = Annotated[Path | None, typer.Option("--store", help="SQLite store file [env CCSM_STORE_PATH; var/ccsm.sqlite].")]
+ElevOpt = Annotated[str | None, typer.Option("--elevation-field", help="Elevation attribute of contour files.")]
+IntervalOpt = Annotated[float | None, typer.Option("--interval", min=0.0, help="Contour interval (required for a DEM).")]
+SourceScaleOpt = Annotated[float | None, typer.Option("--source-scale", help="Scale denominator of the source (t = 0) [50000].")]
+TargetScaleOpt = Annotated[float | None, typer.Option("--target-scale", help="Scale denominator of t = 1 [500000].")]
+
+
+def _set_env(name: str, value: object) -> None:
+    if value is not None:
+        os.environ[f"CCSM_{name}"] = str(value)
+
+
+@app.command()
+def serve(
+    sources: SourcesArg = None,
+    host: Annotated[str, typer.Option(help="Interface to listen on.")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(help="TCP port.", min=1, max=65535)] = 8000,
+    workers: Annotated[int, typer.Option(help="uvicorn worker processes (they share the store).", min=1)] = 1,
+    store: StoreOpt = None,
+    elevation_field: ElevOpt = None,
+    interval: IntervalOpt = None,
+    source_scale: SourceScaleOpt = None,
+    target_scale: TargetScaleOpt = None,
+    log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info",
+) -> None:
+    """Serve tiles, TileJSON, /simplify and the web map (FastAPI on uvicorn).
+
+    Missing or changed sources build in the background at startup; the store then serves them at once on
+    every restart.
+    """
+    import uvicorn
+
+    if sources:
+        missing = [str(s) for s in sources if not s.exists()]
+        if missing:
+            typer.echo(f"error: source not found: {', '.join(missing)}", err=True)
+            raise typer.Exit(2)
+        os.environ["CCSM_SOURCES"] = ",".join(str(s.resolve()) for s in sources)
+    _set_env("STORE_PATH", store)
+    _set_env("ELEVATION_FIELD", elevation_field)
+    _set_env("INTERVAL", interval)
+    _set_env("SOURCE_SCALE", source_scale)
+    _set_env("TARGET_SCALE", target_scale)
+    _set_env("LOG_LEVEL", log_level)
+    from pydantic import ValidationError
+
+    from app.settings import Settings
+
+    try:
+        Settings()
+    except ValidationError as exc:
+        typer.echo(f"error: invalid settings: {exc}", err=True)
+        raise typer.Exit(2) from None
+    # The app is created from the environment in each worker (app.main:app), so 1 or N workers behave alike.
+    uvicorn.run("app.main:app", host=host, port=port, workers=workers, log_level=log_level, proxy_headers=True)
+
+
+@app.command()
+def build(
+    source: Annotated[Path | None, typer.Argument(help="Contour file or DEM; none = the bundled sample.")] = None,
+    store: StoreOpt = None,
+    dataset: Annotated[str | None, typer.Option("--id", help="Dataset id [from the file name; 'sample'].")] = None,
+    name: Annotated[str | None, typer.Option(help="Human name of the dataset.")] = None,
+    elevation_field: ElevOpt = None,
+    interval: IntervalOpt = None,
+    source_scale: SourceScaleOpt = None,
+    target_scale: TargetScaleOpt = None,
+    workers: Annotated[int | None, typer.Option(help="Build processes [one per core].", min=1)] = None,
+    force: Annotated[bool, typer.Option("--force", help="Rebuild even if the store holds the same source.")] = False,
+) -> None:
+    """Precompute a source into the store without serving (one transaction: a killed build changes nothing)."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from app.service import SAMPLE_ID, SAMPLE_NAME, build_lock
+    from app.settings import Settings
+    from engine.errors import CCSMError
+    from engine.store import CCSStore, SourceSpec, build_dataset, slugify
+
+    console = Console(stderr=True)
+    settings = Settings()
+    store_path = store or settings.store_path
+    if source is None:
+        from engine.io import sample_contours_path
+
+        spec = SourceSpec(sample_contours_path(), dataset or SAMPLE_ID, name or SAMPLE_NAME)
+    else:
+        if not source.exists():
+            console.print(f"[red]error:[/red] source not found: {source}")
+            raise typer.Exit(2)
+        spec = SourceSpec(
+            source.resolve(),
+            dataset or slugify(source.stem),
+            name or source.stem,
+            elevation_field=elevation_field if elevation_field is not None else settings.elevation_field,
+            interval=interval if interval is not None else settings.interval,
+            source_scale=source_scale or settings.source_scale,
+            target_scale=target_scale or settings.target_scale,
+        )
+    try:
+        ccs_store = CCSStore(store_path)
+        with build_lock(store_path), Progress(
+            TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+            console=console, transient=False,
+        ) as progress:
+            task = progress.add_task(f"building {spec.dataset}", total=None)
+
+            def report(done: int, total: int) -> None:
+                progress.update(task, completed=done, total=total)
+
+            info, rebuilt = build_dataset(ccs_store, spec, workers=workers or settings.build_workers,
+                                          progress=report, force=force)
+    except CCSMError as exc:
+        console.print(f"[red]error:[/red] {exc}")
+        raise typer.Exit(2) from None
+    verb = "built" if rebuilt else "already current:"
+    console.print(
+        f"{verb} {info.id} -> {store_path} ({info.n_contours} contours, {info.n_vertices} vertices, "
+        f"data_version {info.data_version}, {len(info.bad_features)} bad features)"
+    )

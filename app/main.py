@@ -1,0 +1,102 @@
+"""The FastAPI application, built by :func:`create_app` from typed settings.
+
+``uvicorn app.main:app`` uses the module attribute ``app``, created on first access from the environment
+(``CCSM_*``). Importing this module builds nothing; the store opens in the lifespan, and sources build in
+the background.
+"""
+
+from __future__ import annotations
+
+import logging
+import uuid
+from typing import Any
+
+from fastapi import FastAPI
+from fastapi.middleware.cors import CORSMiddleware
+from fastapi.staticfiles import StaticFiles
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from app.errors import add_exception_handlers
+from app.lifespan import lifespan
+from app.routes import datasets, meta, simplify, tiles
+from app.settings import Settings
+
+DESCRIPTION = """
+Terrain contour lines that generalize **continuously** as the map zooms (Qian et al. 2021, the continuous
+changing surface model), as Mapbox Vector Tiles, GeoJSON at any scale, and a dataset API.
+
+* `GET /tiles/{dataset}/tilejson.json` gives MapLibre, OpenLayers or QGIS everything from one URL.
+* Tiles take `zoom=` (fractional, in [z, z+1)) to morph inside a zoom level, and `method=` to compare CCSM
+  with Douglas-Peucker, Wang-Mueller, Visvalingam-Whyatt or the original lines.
+"""
+
+
+class RequestIdMiddleware:
+    """Gives every request an id (``X-Request-ID``; kept when the client sends a sane one)."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        rid = ""
+        for key, value in scope.get("headers", []):
+            if key == b"x-request-id":
+                text = value.decode("latin-1")
+                rid = text if len(text) <= 64 and text.replace("-", "").isalnum() else ""
+                break
+        rid = rid or uuid.uuid4().hex[:16]
+        scope.setdefault("state", {})["request_id"] = rid
+
+        async def send_with_id(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                message.setdefault("headers", [])
+                message["headers"] = list(message["headers"]) + [(b"x-request-id", rid.encode())]
+            await send(message)
+
+        await self.app(scope, receive, send_with_id)
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """Build the application from settings (read from the environment when None)."""
+    settings = settings or Settings()
+    logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    app = FastAPI(
+        title="ccsm",
+        description=DESCRIPTION,
+        version="0.1.0",
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    add_exception_handlers(app)
+    app.include_router(tiles.router)
+    app.include_router(simplify.router)
+    app.include_router(datasets.router)
+    app.include_router(meta.router)
+    web_dir = settings.web_dir
+    if web_dir.is_dir():
+        vendor = web_dir / "node_modules" / "maplibre-gl" / "dist"
+        if vendor.is_dir():
+            app.mount("/vendor/maplibre-gl", StaticFiles(directory=vendor), name="vendor-maplibre")
+        app.mount("/web", StaticFiles(directory=web_dir), name="web")
+    app.add_middleware(
+        CORSMiddleware,
+        allow_origins=settings.cors_origins,
+        allow_methods=["GET", "HEAD"],
+        allow_headers=["*"],
+        expose_headers=["ETag", "X-Request-ID", "X-Tile-Scale"],
+        max_age=600,
+    )
+    app.add_middleware(RequestIdMiddleware)
+    return app
+
+
+def __getattr__(name: str) -> Any:
+    # ``app`` is created lazily: importing app.main (tests, the CLI) must not read the environment or build.
+    if name == "app":
+        value = create_app()
+        globals()["app"] = value
+        return value
+    raise AttributeError(name)

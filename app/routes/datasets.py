@@ -1,0 +1,109 @@
+"""Datasets: list, describe, upload (built in the background), delete."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Depends, Path, Query, Request, Response
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import JSONResponse
+
+from app.dependencies import get_service, get_settings
+from app.errors import UploadTooLarge
+from app.service import DatasetService
+from app.settings import Settings
+
+router = APIRouter(tags=["datasets"])
+
+NO_STORE = {"Cache-Control": "no-store"}
+DatasetPath = Annotated[str, Path(description="Dataset id.", max_length=64)]
+
+
+@router.get("/datasets")
+def list_datasets(service: Annotated[DatasetService, Depends(get_service)]) -> JSONResponse:
+    """Every dataset: id, name, state (building, ready or failed)."""
+    return JSONResponse(service.summaries(), headers=NO_STORE)
+
+
+@router.get("/datasets/{dataset}")
+def get_dataset(dataset: DatasetPath, service: Annotated[DatasetService, Depends(get_service)]) -> JSONResponse:
+    """One dataset: state, extent, counts, scales, build progress and the features left out."""
+    return JSONResponse(service.detail(dataset), headers=NO_STORE)
+
+
+async def read_limited(request: Request, limit: int) -> bytes:
+    """The request body, refused with 413 as soon as it exceeds ``limit`` bytes."""
+    declared = request.headers.get("content-length")
+    if declared and declared.isdigit() and int(declared) > limit:
+        raise UploadTooLarge(f"upload of {int(declared)} bytes exceeds the limit of {limit} bytes")
+    chunks = []
+    size = 0
+    async for chunk in request.stream():
+        size += len(chunk)
+        if size > limit:
+            raise UploadTooLarge(f"upload exceeds the limit of {limit} bytes")
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+@router.post(
+    "/datasets",
+    status_code=202,
+    openapi_extra={
+        "requestBody": {
+            "required": True,
+            "description": "A GeoJSON FeatureCollection of contour lines (EPSG:4326) with an elevation property.",
+            "content": {"application/geo+json": {"schema": {"type": "object"}},
+                        "application/json": {"schema": {"type": "object"}}},
+        }
+    },
+    responses={202: {"description": "Accepted; the dataset builds in the background (poll GET /datasets/{id})."},
+               400: {"description": "Malformed GeoJSON or no usable contour."},
+               409: {"description": "The dataset id exists."},
+               413: {"description": "Larger than CCSM_MAX_UPLOAD_MB."}},
+)
+async def upload_dataset(
+    request: Request,
+    service: Annotated[DatasetService, Depends(get_service)],
+    settings: Annotated[Settings, Depends(get_settings)],
+    id: Annotated[str | None, Query(description="Dataset id to create (a-z, 0-9, _ and -); default from name.",
+                                    max_length=64, pattern=r"^[a-z0-9_-]+$")] = None,
+    name: Annotated[str | None, Query(description="Human name of the dataset.", max_length=200)] = None,
+    elevation_field: Annotated[str | None, Query(description="Elevation property (found by name if unset).",
+                                                 max_length=100)] = None,
+    interval: Annotated[float | None, Query(description="Contour interval (inferred if unset).", gt=0,
+                                            allow_inf_nan=False)] = None,
+    source_scale: Annotated[float | None, Query(description="Scale denominator of the contours (t = 0).", gt=0,
+                                                le=1e9, allow_inf_nan=False)] = None,
+    target_scale: Annotated[float | None, Query(description="Scale denominator of t = 1.", gt=0, le=1e10,
+                                                allow_inf_nan=False)] = None,
+) -> JSONResponse:
+    """Upload GeoJSON contours; answered 202 while the dataset builds in the background."""
+    body = await read_limited(request, settings.max_upload_bytes)
+    upload, contour_set = await run_in_threadpool(
+        service.validate_upload,
+        body,
+        dataset=id,
+        name=name,
+        elevation_field=elevation_field,
+        interval=interval,
+        source_scale=source_scale or settings.source_scale,
+        target_scale=target_scale or settings.target_scale,
+    )
+    service.start_upload_build(upload, contour_set)
+    out: dict[str, Any] = {
+        "id": upload.dataset,
+        "name": upload.name,
+        "state": "building",
+        "contours": len(contour_set.contours),
+        "bad_features": len(contour_set.bad_features),
+        "href": f"/datasets/{upload.dataset}",
+    }
+    return JSONResponse(out, status_code=202, headers={"Location": out["href"], **NO_STORE})
+
+
+@router.delete("/datasets/{dataset}", status_code=204, responses={404: {"description": "Unknown dataset."}})
+def delete_dataset(dataset: DatasetPath, service: Annotated[DatasetService, Depends(get_service)]) -> Response:
+    """Delete a dataset from the store (a configured source is rebuilt at the next start)."""
+    service.delete(dataset)
+    return Response(status_code=204)

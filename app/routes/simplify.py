@@ -1,0 +1,64 @@
+"""Contours at any map scale as GeoJSON."""
+
+from __future__ import annotations
+
+import json
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, Query, Request, Response
+
+from app.dependencies import MethodName, get_service, get_settings
+from app.responses import accepts_gzip, body_response, etag_matches, make_etag
+from app.service import DatasetService
+from app.settings import Settings
+from engine.errors import InvalidParameter
+from engine.render import MAX_SCALE, feature_collection
+
+router = APIRouter(tags=["simplify"])
+
+
+def parse_bbox(text: str | None) -> list[float] | None:
+    """'west,south,east,north' -> four floats (InvalidParameter when malformed)."""
+    if text is None:
+        return None
+    parts = text.split(",")
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        raise InvalidParameter(f"bbox {text[:100]!r} must be four numbers west,south,east,north") from None
+    return values
+
+
+@router.get(
+    "/simplify",
+    response_class=Response,
+    responses={200: {"content": {"application/geo+json": {}}, "description": "GeoJSON FeatureCollection (EPSG:4326)."}},
+)
+def simplify(
+    request: Request,
+    scale: Annotated[
+        float,
+        Query(description="Map scale denominator (250000 for 1:250,000); any positive value.", gt=0,
+              le=MAX_SCALE, allow_inf_nan=False),
+    ],
+    service: Annotated[DatasetService, Depends(get_service)],
+    settings: Annotated[Settings, Depends(get_settings)],
+    dataset: Annotated[str | None, Query(description="Dataset id; default: the first configured dataset.",
+                                         max_length=64)] = None,
+    bbox: Annotated[str | None, Query(description="Only contours meeting west,south,east,north (degrees).",
+                                      max_length=200)] = None,
+    method: Annotated[MethodName, Query(description="ccsm, dp, wm, vw or original.")] = "ccsm",
+) -> Response:
+    """Every visible contour at a scale, with elevation, t, similarity and scale per feature."""
+    ident = dataset or service.default_dataset()
+    box = parse_bbox(bbox)
+    version = service.require_ready(ident)
+    etag = make_etag("simplify", ident, version, scale, box, method, accepts_gzip(request))
+    headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
+    if etag_matches(request, etag):
+        return Response(status_code=304, headers=headers)
+    contours = service.renderer.simplify(ident, scale, bbox_lonlat=box, method=method)
+    doc = feature_collection(contours, scale, method)
+    doc["dataset"] = ident
+    body = json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
+    return body_response(request, body, "application/geo+json", headers)

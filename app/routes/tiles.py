@@ -1,0 +1,115 @@
+"""Vector tiles and TileJSON."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+from urllib.parse import urlencode
+
+from fastapi import APIRouter, Depends, Path, Request, Response
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import JSONResponse
+
+from app.dependencies import TileQuery, get_service, get_settings
+from app.responses import accepts_gzip, body_response, etag_matches, make_etag
+from app.service import DatasetService, lonlat_bounds
+from app.settings import Settings
+from engine.scale import zoom_for_scale
+
+router = APIRouter(tags=["tiles"])
+
+MVT_MEDIA_TYPE = "application/vnd.mapbox-vector-tile"
+
+DatasetPath = Annotated[str, Path(description="Dataset id (see GET /datasets).", max_length=64)]
+
+
+@router.get(
+    "/tiles/{dataset}/{z}/{x}/{y}.mvt",
+    response_class=Response,
+    responses={
+        200: {"content": {MVT_MEDIA_TYPE: {}}, "description": "The tile (one layer `contours`)."},
+        204: {"description": "No contour in this tile."},
+        304: {"description": "Not modified (If-None-Match matched the ETag)."},
+        404: {"description": "Unknown dataset, or z/x/y outside the tile matrix or the served zooms."},
+    },
+    name="get_tile",
+)
+async def get_tile(
+    request: Request,
+    dataset: DatasetPath,
+    z: Annotated[int, Path(description="Zoom level of the tile.", ge=0, le=30)],
+    x: Annotated[int, Path(description="Tile column, 0 at the antimeridian (west).", ge=0)],
+    y: Annotated[int, Path(description="Tile row, 0 at the north edge (XYZ scheme).", ge=0)],
+    q: Annotated[TileQuery, Depends()],
+    service: Annotated[DatasetService, Depends(get_service)],
+    settings: Annotated[Settings, Depends(get_settings)],
+) -> Response:
+    """One Mapbox Vector Tile of a dataset's contours, generalized for the tile's (fractional) zoom."""
+    renderer = service.renderer
+    _, zoom, t = renderer.check_tile_request(z, x, y, q.zoom, q.method, q.t)
+    version = service.require_ready(dataset)
+    gz = accepts_gzip(request)
+    etag = make_etag(dataset, version, z, x, y, zoom, q.method, t if q.method == "ccsm" else None,
+                     settings.tile_extent, settings.tile_buffer, "gz" if gz else "id")
+    headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
+    if etag_matches(request, etag):
+        return Response(status_code=304, headers=headers)
+    kwargs: dict[str, Any] = {"zoom": zoom, "method": q.method, "t": t}
+    if q.method in ("dp", "wm", "vw"):  # pure-Python baselines: keep the event loop free
+        result = await run_in_threadpool(renderer.tile, dataset, z, x, y, **kwargs)
+    else:
+        result = renderer.tile(dataset, z, x, y, **kwargs)
+    headers["X-Tile-Scale"] = f"{result.scale:.1f}"
+    if result.data is None:
+        return Response(status_code=204, headers=headers)
+    return body_response(request, result.data, MVT_MEDIA_TYPE, headers)
+
+
+@router.get("/tiles/{dataset}/tilejson.json", name="get_tilejson")
+def get_tilejson(
+    request: Request,
+    dataset: DatasetPath,
+    service: Annotated[DatasetService, Depends(get_service)],
+    settings: Annotated[Settings, Depends(get_settings)],
+) -> JSONResponse:
+    """TileJSON 3.0.0 of a dataset: tile URL template (keeps this request's query string), bounds, layers."""
+    version = service.require_ready(dataset)
+    info, interval = service.renderer.info(dataset)
+    query = [(k, v) for k, v in request.query_params.multi_items() if k != "v"]
+    query.append(("v", str(version)))
+    base = str(request.base_url).rstrip("/")
+    url = f"{base}/tiles/{dataset}/{{z}}/{{x}}/{{y}}.mvt?{urlencode(query)}"
+    bounds = lonlat_bounds(info)
+    lat = (bounds[1] + bounds[3]) / 2
+    start_zoom = int(min(settings.max_zoom, max(settings.min_zoom, round(float(zoom_for_scale(info.source_scale, lat)) - 1))))
+    body = {
+        "tilejson": "3.0.0",
+        "name": info.name,
+        "description": "Terrain contours generalized continuously with the zoom (CCSM, Qian et al. 2021).",
+        "version": "1.0.0",
+        "attribution": "Contours: ccsm",
+        "scheme": "xyz",
+        "tiles": [url],
+        "minzoom": settings.min_zoom,
+        "maxzoom": settings.max_zoom,
+        "bounds": bounds,
+        "center": [round((bounds[0] + bounds[2]) / 2, 6), round(lat, 6), start_zoom],
+        "vector_layers": [
+            {
+                "id": "contours",
+                "description": "Contour lines; each feature id is stable across zooms.",
+                "minzoom": settings.min_zoom,
+                "maxzoom": settings.max_zoom,
+                "fields": {
+                    "elevation": "Number: height of the contour",
+                    "index": f"Boolean: true on every 5th interval ({5 * interval:g})" if interval else "Boolean",
+                    "t": "Number: generalization parameter in [0, 1] (0 = source detail)",
+                },
+            }
+        ],
+        "data_version": version,
+    }
+    etag = make_etag("tilejson", dataset, version, str(request.url))
+    headers = {"ETag": etag, "Cache-Control": f"public, max-age={min(settings.cache_max_age, 60)}"}
+    if etag_matches(request, etag):
+        return Response(status_code=304, headers=headers)  # type: ignore[return-value]
+    return JSONResponse(body, headers=headers)
