@@ -89,8 +89,8 @@ def count_schedule(n: int, floor: int, levels: int) -> NDArray[np.intp]:
     """Vertices kept at each level when every level drops the same share of the original count.
 
     The paper's Table 1 ("reduction rate of points 1 %", 100 iterations): level ``i`` keeps
-    ``round(n - (n - floor) * i / (levels - 1))`` vertices, so level 0 keeps all ``n`` and the last level keeps
-    ``floor``. Halves round up so the schedule does not depend on banker's rounding.
+    ``round(n - (n - floor) * i / (levels - 1))`` vertices, so level 0 keeps all ``n`` and the last level
+    keeps ``floor``. Halves round up so the schedule does not depend on banker's rounding.
 
     >>> count_schedule(10, 2, 5).tolist()
     [10, 8, 6, 4, 2]

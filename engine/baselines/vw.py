@@ -21,9 +21,8 @@ from engine.types import Coords
 @njit(cache=True)
 def _tri_area(xy: np.ndarray, a: int, b: int, c: int) -> float:  # pragma: no cover - compiled
     """Area in m² of the triangle of vertices ``a``, ``b``, ``c``."""
-    return 0.5 * abs(
-        (xy[b, 0] - xy[a, 0]) * (xy[c, 1] - xy[a, 1]) - (xy[c, 0] - xy[a, 0]) * (xy[b, 1] - xy[a, 1])
-    )
+    twice = (xy[b, 0] - xy[a, 0]) * (xy[c, 1] - xy[a, 1]) - (xy[c, 0] - xy[a, 0]) * (xy[b, 1] - xy[a, 1])
+    return 0.5 * abs(float(twice))
 
 
 @njit(cache=True)
