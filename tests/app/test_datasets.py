@@ -1,0 +1,57 @@
+import json
+import time
+
+from tests.app.conftest import synthetic_features
+
+
+def wait_ready(client, ident, timeout=120):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        d = client.get(f"/datasets/{ident}").json()
+        if d["state"] in ("ready", "failed"):
+            return d
+        time.sleep(0.1)
+    raise TimeoutError(ident)
+
+
+def test_list(client):
+    items = client.get("/datasets").json()
+    assert [(i["id"], i["state"]) for i in items] == [("hills", "ready")]
+    assert set(items[0]) >= {"id", "name", "state"}
+
+
+def test_detail(client):
+    d = client.get("/datasets/hills").json()
+    assert d["state"] == "ready"
+    assert d["counts"]["contours"] == 28
+    assert len(d["bounds"]) == 4 and d["bounds"][0] < d["bounds"][2]
+    assert d["scales"]["source_scale"] == 50000 and d["scales"]["target_scale"] == 500000
+    assert d["interval"] == 20
+    assert d["bad_features"] == []
+    assert d["tilejson"] == "/tiles/hills/tilejson.json"
+
+
+def test_unknown_dataset_404(client):
+    r = client.get("/datasets/nope")
+    assert r.status_code == 404 and r.json()["error"] == "unknown_layer"
+
+
+def test_upload_builds_in_background_then_delete(client):
+    feats = synthetic_features(seed=3)[:6]
+    feats.append({"type": "Feature", "properties": {"elevation": 5}, "geometry": {"type": "Point", "coordinates": [0, 0]}})
+    body = json.dumps({"type": "FeatureCollection", "features": feats})
+    r = client.post("/datasets?id=mine&name=My%20hills", content=body, headers={"content-type": "application/geo+json"})
+    assert r.status_code == 202, r.text
+    assert r.json()["id"] == "mine" and r.headers["location"] == "/datasets/mine"
+    assert any(i["id"] == "mine" for i in client.get("/datasets").json())
+    d = wait_ready(client, "mine")
+    assert d["state"] == "ready", d
+    assert d["counts"]["contours"] == 6 and d["name"] == "My hills"
+    assert len(d["bad_features"]) == 1
+    tile = client.get("/tiles/mine/12/1088/1598.mvt")
+    assert tile.status_code in (200, 204)
+    assert client.post("/datasets?id=mine", content=body).status_code == 409
+    assert client.delete("/datasets/mine").status_code == 204
+    assert client.get("/datasets/mine").status_code == 404
+    assert client.delete("/datasets/mine").status_code == 404
+    assert client.get("/datasets/hills").json()["state"] == "ready"

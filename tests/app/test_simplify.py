@@ -1,0 +1,60 @@
+import math
+
+import numpy as np
+import pytest
+
+from engine.scale import scale_for_zoom
+from tests.app.conftest import LAT0, LON0
+
+
+def test_feature_collection(client):
+    r = client.get("/simplify?scale=250000&dataset=hills")
+    assert r.status_code == 200
+    assert r.headers["content-type"].startswith("application/geo+json")
+    doc = r.json()
+    assert doc["type"] == "FeatureCollection" and doc["features"]
+    for f in doc["features"]:
+        p = f["properties"]
+        assert set(p) >= {"elevation", "t", "similarity", "scale"}
+        assert p["scale"] == 250000 and 0 <= p["t"] <= 1 and 0 < p["similarity"] <= 1
+        for lon, lat in f["geometry"]["coordinates"]:
+            assert abs(lon - LON0) < 0.2 and abs(lat - LAT0) < 0.2
+
+
+@pytest.mark.parametrize("scale", [1, 12_345.6, 50_000, 123_456.7, 500_000, 3e6])
+def test_any_positive_scale(client, scale):
+    r = client.get(f"/simplify?scale={scale}")
+    assert r.status_code == 200
+    feats = r.json()["features"]
+    if scale <= 50_000:
+        assert all(f["properties"]["t"] == 0 for f in feats)
+
+
+def test_bbox_filter(client):
+    every = client.get("/simplify?scale=100000").json()["features"]
+    some = client.get(f"/simplify?scale=100000&bbox={LON0 + 0.03},{LAT0 + 0.01},{LON0 + 0.05},{LAT0 + 0.03}").json()
+    assert 0 < len(some["features"]) < len(every)
+
+
+@pytest.mark.parametrize("method", ["ccsm", "dp", "vw", "wm"])
+def test_half_zoom_lies_between_in_similarity(client, method):
+    """The contours at zoom z + 0.5 lie between those at z and z + 1 in similarity to the input
+    (a smaller zoom is a smaller scale: more generalized, less similar)."""
+    sims = {}
+    for zoom in (10.0, 10.5, 11.0):
+        scale = float(scale_for_zoom(zoom, LAT0))
+        feats = client.get(f"/simplify?scale={scale}&method={method}").json()["features"]
+        sims[zoom] = {f["id"]: f["properties"]["similarity"] for f in feats}
+    common = set(sims[10.0]) & set(sims[10.5]) & set(sims[11.0])
+    mean = {z: np.mean([sims[z][i] for i in common]) for z in sims}
+    assert mean[10.0] - 1e-9 <= mean[10.5] <= mean[11.0] + 1e-9
+    if method != "wm":  # WM leaves these smooth synthetic rings alone at both zooms
+        assert mean[10.0] < mean[11.0]
+    if method == "ccsm":
+        for i in common:
+            assert sims[10.0][i] - 1e-6 <= sims[10.5][i] <= sims[11.0][i] + 1e-6
+
+
+def test_original_similarity_is_one(client):
+    feats = client.get("/simplify?scale=300000&method=original").json()["features"]
+    assert feats and all(math.isclose(f["properties"]["similarity"], 1.0) for f in feats)

