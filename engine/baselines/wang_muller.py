@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from engine.baselines._wm_kernels import detect_bends, wm_generalize, wm_ladder_removal
 from engine.simplify import douglas_peucker_count
-from engine.tolerances import MIN_VISIBLE_DISTANCE_M
+from engine.tolerances import MIN_VISIBLE_RING_SIDE_M
 from engine.types import Coords
 
 
@@ -64,9 +64,9 @@ class WMParams:
         so the loop ends anyway; the bound only guards against a numerical cycle).
     diameter_on_paper_m
         Diameter of the reference half circle on the map, in metres of paper; ``D = diameter_on_paper_m x
-        scale`` on the ground. 0.1 mm (:data:`engine.tolerances.MIN_VISIBLE_DISTANCE_M`), so that
-        ``D = tolerance_for_scale(scale)``, the distance that also sets DP's epsilon and VW's threshold (see
-        :func:`wm_at_scale` for why, and for how mild WM is at that value).
+        scale`` on the ground. 0.5 mm (:data:`engine.tolerances.MIN_VISIBLE_RING_SIDE_M`), the smallest closed
+        shape a map can show: a bend is a closed shape with its baseline, and at 0.1 mm (DP's epsilon) WM's
+        size measure keeps 99.9 % of a 90 m DEM's vertices even at 1:500,000 (see :func:`wm_at_scale`).
     """
 
     gentle_inflection_deg: float = 5.0
@@ -75,7 +75,7 @@ class WMParams:
     similar_size_ratio: float = 0.5
     similar_cmp_diff: float = 0.2
     max_iterations_per_vertex: int = 4
-    diameter_on_paper_m: float = MIN_VISIBLE_DISTANCE_M
+    diameter_on_paper_m: float = MIN_VISIBLE_RING_SIDE_M
 
 
 DEFAULT_WM_PARAMS = WMParams()
@@ -148,19 +148,14 @@ def wm_ladder(xy: Coords, closed: bool, levels: int, params: WMParams = DEFAULT_
 def wm_at_scale(
     xy: Coords, closed: bool, scale: float, params: WMParams = DEFAULT_WM_PARAMS
 ) -> NDArray[np.float64]:
-    """Wang–Müller at a map scale: reference half circle of diameter ``D = 0.1 mm x scale`` (metres).
+    """Wang–Müller at a map scale: reference half circle of diameter ``D = 0.5 mm x scale`` (metres).
 
-    By default ``D`` is :func:`engine.tolerances.tolerance_for_scale`, the same ground distance that gives DP
-    its epsilon. The paper decides that two results are "at the same scale" through exactly this 0.1 mm
-    rule (section 3.2.3), so one ruler for all three methods keeps the comparison the paper's.
-
-    WM is then by far the mildest method. The reference half circle of diameter ``eps`` is only ``eps / 2``
-    high where DP drops any bump lower than ``eps``, and because the adjusted size is ``0.75 P**2 / (4 pi)``
-    even the smallest bend of a 90 m DEM contour (two ~50 m segments, perimeter ~150 m) compares with a
-    half circle of about 60 m diameter. On the Jacksboro sample WM keeps 99.9 % of the vertices at
-    1:500,000 (DP 20 %, VW 36 %) and 36 % at 1:5,000,000. ``params.diameter_on_paper_m`` changes the rule
-    (0.5 mm, :data:`engine.tolerances.MIN_VISIBLE_RING_SIDE_M`, is the project's smallest visible closed
-    shape).
+    0.5 mm on paper is the smallest closed shape a map can show (the same rule that hides small rings).
+    At DP's 0.1 mm WM barely acts: the reference half circle of diameter ``eps`` is only ``eps / 2`` high
+    where DP drops any bump lower than ``eps``, and because the adjusted size is ``0.75 P**2 / (4 pi)`` even
+    the smallest bend of a 90 m DEM contour (two ~50 m segments) compares with a half circle of about 60 m;
+    on the Jacksboro sample WM at 0.1 mm keeps 99.9 % of the vertices at 1:500,000 (DP 20 %, VW 36 %).
+    ``params.diameter_on_paper_m`` changes the rule.
 
     Parameters
     ----------

@@ -23,8 +23,8 @@ HYPOTHESIS = settings(deadline=None, max_examples=40)
 
 
 def scale_for_diameter(d_m: float) -> float:
-    """Map scale whose reference half circle has diameter ``d_m`` (D = 0.1 mm x scale)."""
-    return d_m / 1e-4
+    """Map scale whose reference half circle has diameter ``d_m`` (D = 0.5 mm x scale)."""
+    return d_m / 5e-4  # the reference half circle is 0.5 mm across on paper
 
 
 def half_circle(x0: float, d: float, n: int = 24, up: bool = True) -> np.ndarray:
@@ -312,8 +312,9 @@ def test_wm_keeps_the_jacksboro_contours_simple() -> None:
             assert as_geometry(level, contour.closed).is_simple, (contour.id, i)
 
 
-def test_reference_diameter_is_0_1_mm_on_paper_by_default() -> None:
-    assert DEFAULT_WM_PARAMS.diameter_on_paper_m * 250_000 == pytest.approx(tolerance_for_scale(250_000))
+def test_reference_diameter_is_0_5_mm_on_paper_by_default() -> None:
+    # 0.5 mm: five times DP's epsilon, the smallest closed shape a map can show.
+    assert DEFAULT_WM_PARAMS.diameter_on_paper_m * 250_000 == pytest.approx(5 * tolerance_for_scale(250_000))
     xy = meander(3, 300, 2.0)
-    wider = WMParams(diameter_on_paper_m=0.0005)
-    assert_array_equal(wm_at_scale(xy, False, 200_000, wider), simplify_at_scale("wm", xy, False, 1_000_000))
+    narrower = WMParams(diameter_on_paper_m=0.0001)
+    assert_array_equal(wm_at_scale(xy, False, 200_000, narrower), simplify_at_scale("wm", xy, False, 40_000))
