@@ -125,7 +125,9 @@ async def http_error_handler(request: Request, exc: Exception) -> JSONResponse:
 async def unexpected_error_handler(request: Request, exc: Exception) -> JSONResponse:
     """Anything else: 500, a generic message and the request id; the traceback only in the log."""
     log.error("request %s %s %s failed", request_id(request), request.method, request.url.path, exc_info=exc)
-    return JSONResponse(error_body(request, "internal_error", "internal server error"), 500)
+    # This handler runs outside the request-id middleware (in Starlette's ServerErrorMiddleware): set it here.
+    rid = request_id(request)
+    return JSONResponse(error_body(request, "internal_error", "internal server error"), 500, headers={"X-Request-ID": rid})
 
 
 def add_exception_handlers(app: FastAPI) -> None:

@@ -114,6 +114,7 @@ def build(
             source_scale=source_scale or settings.source_scale,
             target_scale=target_scale or settings.target_scale,
         )
+    console.print(f"building {spec.dataset} from {spec.path.name} into {store_path}")
     try:
         ccs_store = CCSStore(store_path)
         with build_lock(store_path), Progress(

@@ -1,0 +1,54 @@
+import mapbox_vector_tile
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from engine.mvt import LineFeature, encode_tile, encode_tile_reference, varint, varint_array
+from engine.tiles import drop_repeats
+
+
+def decode(b):
+    return mapbox_vector_tile.decode(b, default_options={"y_coord_down": True})
+
+
+@given(st.lists(st.integers(0, 2**35 - 1), min_size=1, max_size=50))
+def test_varint_array_matches_scalar(values):
+    data, starts = varint_array(np.array(values, dtype=np.uint64))
+    assert data.tobytes() == b"".join(varint(v) for v in values)
+    assert starts[0] == 0
+
+
+lines = st.lists(st.tuples(st.integers(-64, 4160), st.integers(-64, 4160)), min_size=2, max_size=30)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.lists(lines, min_size=1, max_size=3), min_size=1, max_size=6))
+def test_same_tile_as_mapbox_vector_tile(features):
+    feats = []
+    for i, parts in enumerate(features):
+        ps = [drop_repeats(np.array(p, dtype=np.int64)) for p in parts]
+        ps = [p for p in ps if len(p) >= 2]
+        if ps:
+            feats.append(LineFeature(i, ps, {"elevation": float(100 + i), "index": i % 2 == 0, "t": 0.5, "n": -i}))
+    if not feats:
+        return
+    ours = decode(encode_tile({"contours": feats}))
+    ref = decode(encode_tile_reference({"contours": feats}))
+    assert ours == ref
+
+
+def test_empty_tile_is_empty_bytes():
+    assert encode_tile({"contours": []}) == b""
+
+
+def test_multilinestring_cursor_carries_between_parts():
+    f = LineFeature(3, [np.array([[10, 10], [20, 20]]), np.array([[5, 5], [0, 9]])], {"elevation": 1.0})
+    geom = decode(encode_tile({"contours": [f]}))["contours"]["features"][0]["geometry"]
+    assert geom == {"type": "MultiLineString", "coordinates": [[[10, 10], [20, 20]], [[5, 5], [0, 9]]]}
+
+
+@pytest.mark.parametrize("extent", [256, 4096, 8192])
+def test_extent(extent):
+    f = LineFeature(0, [np.array([[0, 0], [extent, extent]])])
+    assert decode(encode_tile({"contours": [f]}, extent))["contours"]["extent"] == extent

@@ -1,0 +1,97 @@
+import numpy as np
+import pytest
+
+from engine.errors import StoreError, UnknownLayer
+from engine.io import read_source
+from engine.store import CCSStore, SourceSpec, build_dataset, source_hash
+from tests.app.conftest import synthetic_features, write_geojson
+
+
+@pytest.fixture(scope="module")
+def src(tmp_path_factory):
+    return write_geojson(tmp_path_factory.mktemp("s") / "h.geojson", synthetic_features()[:8])
+
+
+@pytest.fixture()
+def store(tmp_path, src):
+    s = CCSStore(tmp_path / "x.sqlite")
+    build_dataset(s, SourceSpec(src, "h", "h"), workers=1)
+    return s
+
+
+def test_wal_and_format(store):
+    assert store._con().execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    assert store.integrity_ok()
+
+
+def test_round_trip(store, src):
+    info = store.dataset("h")
+    assert info.n_contours == 8 and info.data_version == 1
+    recs = store.load(store.all_fids("h"))
+    assert len(recs) == 8
+    r = recs[0]
+    assert r.base.shape == r.top.shape and r.base.shape[1] == 2
+    assert r.t_at_scale.shape == info.ladder.shape
+    assert r.sig.shape == (len(r.base),) and np.isinf(r.sig[0])
+    cs = read_source(src)
+    assert np.allclose(r.original_w, cs.contours[0].coords)
+
+
+def test_rtree_query(store):
+    info = store.dataset("h")
+    assert len(store.query("h", info.bounds_3857)) == 8
+    assert store.query("h", (0, 0, 1, 1)) == []
+    assert store.query("other", info.bounds_3857) == []
+
+
+def test_unchanged_source_is_not_rebuilt_changed_one_is(store, src, tmp_path):
+    spec = SourceSpec(src, "h", "h")
+    _, rebuilt = build_dataset(store, spec, workers=1)
+    assert not rebuilt
+    changed = write_geojson(tmp_path / "h.geojson", synthetic_features()[:9])
+    info, rebuilt = build_dataset(store, SourceSpec(changed, "h", "h"), workers=1)
+    assert rebuilt and info.data_version == 2 and info.n_contours == 9
+    assert info.source_hash == source_hash(changed, spec.params())
+
+
+def test_failed_write_rolls_back(store, src, monkeypatch):
+    before = store.dataset("h")
+    fids = store.all_fids("h")
+    import engine.store as mod
+
+    calls = {"n": 0}
+    real = mod.row_significance
+
+    def flaky(*a):
+        calls["n"] += 1
+        if calls["n"] > 6:
+            raise RuntimeError("disk on fire")
+        return real(*a)
+
+    monkeypatch.setattr(mod, "row_significance", flaky)
+    with pytest.raises(RuntimeError):
+        build_dataset(store, SourceSpec(src, "h", "h", source_scale=40_000), workers=1)
+    assert store.dataset("h").data_version == before.data_version
+    assert store.all_fids("h") == fids
+
+
+def test_rollback_inside_the_transaction(store):
+    fids = store.all_fids("h")
+    with pytest.raises(RuntimeError), store._write() as cur:
+        cur.execute("DELETE FROM contours WHERE dataset='h'")
+        raise RuntimeError("killed")
+    assert store.all_fids("h") == fids
+
+
+def test_delete_and_unknown(store):
+    assert store.delete("h")
+    with pytest.raises(UnknownLayer):
+        store.dataset("h")
+    assert not store.delete("h")
+
+
+def test_not_a_store(tmp_path):
+    bad = tmp_path / "bad.sqlite"
+    bad.write_bytes(b"this is not sqlite" * 100)
+    with pytest.raises(StoreError):
+        CCSStore(bad)

@@ -1,0 +1,98 @@
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from engine.errors import InvalidParameter, TileOutOfRange
+from engine.tiles import (
+    HALF_WORLD_M,
+    Bounds,
+    Tile,
+    check_fractional_zoom,
+    check_tile,
+    chunk_bounds,
+    clip_to_grid,
+    collinear_free,
+    lonlat_to_mercator,
+    mercator_to_lonlat,
+    quantize,
+    row_runs,
+    tile_bounds,
+    tile_center_latitude,
+    tiles_covering,
+)
+
+
+def test_tile_bounds_world():
+    assert tile_bounds(Tile(0, 0, 0)) == Bounds(-HALF_WORLD_M, -HALF_WORLD_M, HALF_WORLD_M, HALF_WORLD_M)
+
+
+@given(st.integers(0, 20), st.floats(0, 1, exclude_max=True), st.floats(0, 1, exclude_max=True))
+def test_tiles_covering_point_contains_it(z, fx, fy):
+    x = -HALF_WORLD_M + fx * 2 * HALF_WORLD_M
+    y = -HALF_WORLD_M + fy * 2 * HALF_WORLD_M
+    (t,) = tiles_covering(Bounds(x, y, x, y), z)
+    b = tile_bounds(t)
+    assert b.minx - 1e-6 <= x <= b.maxx + 1e-6 and b.miny - 1e-6 <= y <= b.maxy + 1e-6
+
+
+@pytest.mark.parametrize(("z", "x", "y"), [(-1, 0, 0), (17, 0, 0), (2, 4, 0), (2, 0, 4), (2, -1, 0)])
+def test_check_tile_rejects(z, x, y):
+    with pytest.raises(TileOutOfRange):
+        check_tile(z, x, y, 0, 16)
+
+
+@pytest.mark.parametrize("zoom", [4.99, 6.0, float("nan"), float("inf")])
+def test_fractional_zoom_rejects(zoom):
+    with pytest.raises(InvalidParameter):
+        check_fractional_zoom(5, zoom)
+
+
+def test_fractional_zoom_default():
+    assert check_fractional_zoom(5, None) == 5.0 and check_fractional_zoom(5, 5.5) == 5.5
+
+
+def test_center_latitude():
+    assert tile_center_latitude(Tile(0, 0, 0)) == pytest.approx(0.0)
+    assert tile_center_latitude(Tile(1, 0, 0)) > 0
+
+
+@given(st.floats(-179, 179), st.floats(-85, 85))
+def test_mercator_round_trip(lon, lat):
+    x, y = lonlat_to_mercator(np.array([lon]), np.array([lat]))
+    lo, la = mercator_to_lonlat(x, y)
+    assert lo[0] == pytest.approx(lon, abs=1e-9) and la[0] == pytest.approx(lat, abs=1e-9)
+
+
+def test_quantize_y_down():
+    b = Bounds(0.0, 0.0, 100.0, 100.0)
+    q = quantize(np.array([[0.0, 100.0], [100.0, 0.0], [50.0, 50.0]]), b, 4096)
+    assert q.tolist() == [[0, 0], [4096, 4096], [2048, 2048]]
+
+
+def test_clip_to_grid():
+    line = np.array([[-500, 100], [5000, 100]])
+    (part,) = clip_to_grid(line, -64, 4160)
+    assert part.tolist() == [[-64, 100], [4160, 100]]
+    assert clip_to_grid(np.array([[5000, 5000], [6000, 6000]]), -64, 4160) == []
+
+
+def test_row_runs_cover_the_box():
+    rng = np.random.default_rng(0)
+    rows = np.cumsum(rng.normal(size=(500, 2)), axis=0)
+    cb = chunk_bounds([rows])
+    box = Bounds(-5, -5, 5, 5)
+    runs = row_runs(cb, box, len(rows))
+    covered = np.zeros(len(rows), bool)
+    for a, b in runs:
+        covered[a:b] = True
+    inside = (np.abs(rows) <= 5).all(axis=1)
+    assert covered[inside].all()
+
+
+def test_collinear_free():
+    rows = np.array([[0.0, 0], [1, 0], [2, 0], [2, 1], [2, 2]])
+    assert collinear_free(rows).tolist() == [0, 2, 4]
+    assert math.isclose(len(collinear_free(rows[:2])), 2)
