@@ -64,14 +64,20 @@ def main() -> None:
     cs = read_source(sample_contours_path())
     n = len(cs.contours)
     nv = sum(c.n_vertices for c in cs.contours)
-    print(f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}, workers {args.workers}")
+    print(
+        f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}, workers {args.workers}"
+    )
     print(f"sample: {n} contours, {nv} vertices, {sum(c.closed for c in cs.contours)} rings")
 
-    build_contour_set(ContourSet(cs.contours[:4], cs.working_crs, cs.source_crs), params, workers=1)  # JIT warm-up
+    build_contour_set(
+        ContourSet(cs.contours[:4], cs.working_crs, cs.source_crs), params, workers=1
+    )  # JIT warm-up
     seconds, built = time_build(cs, params, args.workers)
     surfaces = built.surfaces  # type: ignore[attr-defined]
     print(f"build (surfaces + similarity tables + scale model): {seconds:.2f} s")
-    print(f"  {1000 * seconds / n:.2f} ms per contour, {1000 * seconds / (nv / 1000):.1f} ms per 1,000 input vertices")
+    print(
+        f"  {1000 * seconds / n:.2f} ms per contour, {1000 * seconds / (nv / 1000):.1f} ms per 1,000 input vertices"
+    )
     print(f"  built {len(surfaces)}, bad {len(built.bad_features)}")  # type: ignore[attr-defined]
 
     ts = np.linspace(0.0, 1.0, args.slices)
@@ -86,9 +92,13 @@ def main() -> None:
     own, children = peak_rss_mb()
     print(f"peak memory: {own:.0f} MB this process, {children:.0f} MB largest worker")
 
-    base = cs if args.growth_subset <= 0 else dataclasses.replace(cs, contours=cs.contours[: args.growth_subset])
+    base = (
+        cs if args.growth_subset <= 0 else dataclasses.replace(cs, contours=cs.contours[: args.growth_subset])
+    )
     print("\nlinear growth" + (f" (first {args.growth_subset} contours)" if args.growth_subset > 0 else ""))
-    print(f"{'copies':>6} {'contours':>9} {'vertices':>9} {'build s':>9} {'ms/contour':>11} {'x time / x data':>16}")
+    print(
+        f"{'copies':>6} {'contours':>9} {'vertices':>9} {'build s':>9} {'ms/contour':>11} {'x time / x data':>16}"
+    )
     first: float | None = None
     for factor in (int(f) for f in args.factors.split(",")):
         data = replicate(base, factor)

@@ -88,16 +88,44 @@ def _bad_feature_table(bad: list[BadFeature], limit: int | None = None) -> Table
 
 @app.command()
 def simplify(
-    source: Annotated[Path, typer.Argument(help="Contour file (GeoJSON, GeoPackage, Shapefile) or DEM (GeoTIFF, .asc, .npz).")],
-    scale: Annotated[float, typer.Option("--scale", help="Map scale denominator of the output (250000 for 1:250,000).")] = 250_000.0,
-    out: Annotated[Path, typer.Option("--out", "-o", help="Output GeoJSON file.")] = Path("simplified.geojson"),
-    method: Annotated[str, typer.Option("--method", help="ccsm, dp (Douglas-Peucker), wm (Wang-Mueller) or vw (Visvalingam-Whyatt).")] = "ccsm",
-    source_scale: Annotated[float, typer.Option("--source-scale", help="Scale denominator of the input (t = 0).")] = 50_000.0,
-    target_scale: Annotated[float, typer.Option("--target-scale", help="Scale denominator of the CCS's target (t = 1).")] = 500_000.0,
-    elevation_field: Annotated[str | None, typer.Option("--elevation-field", help="Elevation attribute of a contour file (found by name if omitted).")] = None,
-    interval: Annotated[float | None, typer.Option("--interval", help="Contour interval of a DEM source, in its vertical unit.")] = None,
-    crs: Annotated[str, typer.Option("--crs", help="Output CRS: 4326 (GeoJSON default), 3857 or source.")] = "4326",
-    workers: Annotated[int | None, typer.Option("--workers", help="Worker processes (default: one per core).")] = None,
+    source: Annotated[
+        Path,
+        typer.Argument(help="Contour file (GeoJSON, GeoPackage, Shapefile) or DEM (GeoTIFF, .asc, .npz)."),
+    ],
+    scale: Annotated[
+        float, typer.Option("--scale", help="Map scale denominator of the output (250000 for 1:250,000).")
+    ] = 250_000.0,
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output GeoJSON file.")] = Path(
+        "simplified.geojson"
+    ),
+    method: Annotated[
+        str,
+        typer.Option(
+            "--method", help="ccsm, dp (Douglas-Peucker), wm (Wang-Mueller) or vw (Visvalingam-Whyatt)."
+        ),
+    ] = "ccsm",
+    source_scale: Annotated[
+        float, typer.Option("--source-scale", help="Scale denominator of the input (t = 0).")
+    ] = 50_000.0,
+    target_scale: Annotated[
+        float, typer.Option("--target-scale", help="Scale denominator of the CCS's target (t = 1).")
+    ] = 500_000.0,
+    elevation_field: Annotated[
+        str | None,
+        typer.Option(
+            "--elevation-field", help="Elevation attribute of a contour file (found by name if omitted)."
+        ),
+    ] = None,
+    interval: Annotated[
+        float | None,
+        typer.Option("--interval", help="Contour interval of a DEM source, in its vertical unit."),
+    ] = None,
+    crs: Annotated[
+        str, typer.Option("--crs", help="Output CRS: 4326 (GeoJSON default), 3857 or source.")
+    ] = "4326",
+    workers: Annotated[
+        int | None, typer.Option("--workers", help="Worker processes (default: one per core).")
+    ] = None,
 ) -> None:
     """Write every contour of SOURCE as it looks at one map scale."""
     from engine.baselines import simplify_at_scale
@@ -131,7 +159,10 @@ def simplify(
             with _progress() as progress:
                 task = progress.add_task("building surfaces", total=len(contour_set.contours))
                 built = build_contour_set(
-                    contour_set, params, workers=workers, progress=lambda d, t: progress.update(task, completed=d, total=t)
+                    contour_set,
+                    params,
+                    workers=workers,
+                    progress=lambda d, t: progress.update(task, completed=d, total=t),
                 )
             bad = built.bad_features
             for ccs in built.surfaces:
@@ -144,8 +175,16 @@ def simplify(
                 initial = by_id[ccs.contour_id].coords
                 if ccs.closed:
                     initial = rotate_ring_to(initial, ccs.base[0])
-                sim = SimilarityReference.of(initial, ccs.closed, params.similarity_spacing_m).similarity(geom)
-                props = {"id": ccs.contour_id, "elevation": ccs.elevation, "t": t, "similarity": sim, "scale": scale}
+                sim = SimilarityReference.of(initial, ccs.closed, params.similarity_spacing_m).similarity(
+                    geom
+                )
+                props = {
+                    "id": ccs.contour_id,
+                    "elevation": ccs.elevation,
+                    "t": t,
+                    "similarity": sim,
+                    "scale": scale,
+                }
                 features.append((geom, ccs.closed, props))
         else:
             bad = list(contour_set.bad_features)
@@ -154,13 +193,21 @@ def simplify(
                 for c in contour_set.contours:
                     try:
                         geom = simplify_at_scale(method, c.coords, c.closed, scale)
-                        sim = SimilarityReference.of(c.coords, c.closed, params.similarity_spacing_m).similarity(geom)
+                        sim = SimilarityReference.of(
+                            c.coords, c.closed, params.similarity_spacing_m
+                        ).similarity(geom)
                     except CCSMError as exc:
                         bad.append(BadFeature(c.id, str(exc)))
                         continue
                     finally:
                         progress.advance(task)
-                    props = {"id": c.id, "elevation": c.elevation, "t": None, "similarity": sim, "scale": scale}
+                    props = {
+                        "id": c.id,
+                        "elevation": c.elevation,
+                        "t": None,
+                        "similarity": sim,
+                        "scale": scale,
+                    }
                     features.append((geom, c.closed, props))
         out.parent.mkdir(parents=True, exist_ok=True)
         write_geojson(out, features, from_crs=contour_set.working_crs, to_crs=to_crs)
@@ -179,18 +226,40 @@ def simplify(
 @app.command()
 def evaluate(
     source: Annotated[Path, typer.Argument(help="Contour file or DEM to evaluate on.")],
-    out: Annotated[Path, typer.Option("--out", help="Directory for the CSV tables, PNG figures and summary.md.")] = Path("evaluation"),
-    levels: Annotated[int, typer.Option("--levels", help="Results per method and contour (paper: 100).")] = 100,
-    sample: Annotated[int | None, typer.Option("--sample", help="Evaluate this many random contours (default: all).")] = None,
+    out: Annotated[
+        Path, typer.Option("--out", help="Directory for the CSV tables, PNG figures and summary.md.")
+    ] = Path("evaluation"),
+    levels: Annotated[
+        int, typer.Option("--levels", help="Results per method and contour (paper: 100).")
+    ] = 100,
+    sample: Annotated[
+        int | None, typer.Option("--sample", help="Evaluate this many random contours (default: all).")
+    ] = None,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the sample and of the 20 table contours.")] = 0,
-    source_scale: Annotated[float, typer.Option("--source-scale", help="Scale denominator of the input.")] = 50_000.0,
-    target_scale: Annotated[float, typer.Option("--target-scale", help="Target scale for --target scale.")] = 500_000.0,
-    target: Annotated[str, typer.Option("--target", help="extreme (paper Fig. 10: down to 2 points / a triangle) or scale.")] = "extreme",
-    crossing_step: Annotated[int, typer.Option("--crossing-step", help="Count crossings at every n-th level.")] = 1,
-    table_contours: Annotated[int, typer.Option("--table-contours", help="Random contours of Table 2, Fig. 11, Table 3.")] = 20,
-    elevation_field: Annotated[str | None, typer.Option("--elevation-field", help="Elevation attribute of a contour file.")] = None,
-    interval: Annotated[float | None, typer.Option("--interval", help="Contour interval of a DEM source.")] = None,
-    workers: Annotated[int | None, typer.Option("--workers", help="Worker processes (default: one per core).")] = None,
+    source_scale: Annotated[
+        float, typer.Option("--source-scale", help="Scale denominator of the input.")
+    ] = 50_000.0,
+    target_scale: Annotated[
+        float, typer.Option("--target-scale", help="Target scale for --target scale.")
+    ] = 500_000.0,
+    target: Annotated[
+        str, typer.Option("--target", help="extreme (paper Fig. 10: down to 2 points / a triangle) or scale.")
+    ] = "extreme",
+    crossing_step: Annotated[
+        int, typer.Option("--crossing-step", help="Count crossings at every n-th level.")
+    ] = 1,
+    table_contours: Annotated[
+        int, typer.Option("--table-contours", help="Random contours of Table 2, Fig. 11, Table 3.")
+    ] = 20,
+    elevation_field: Annotated[
+        str | None, typer.Option("--elevation-field", help="Elevation attribute of a contour file.")
+    ] = None,
+    interval: Annotated[
+        float | None, typer.Option("--interval", help="Contour interval of a DEM source.")
+    ] = None,
+    workers: Annotated[
+        int | None, typer.Option("--workers", help="Worker processes (default: one per core).")
+    ] = None,
 ) -> None:
     """Compare CCSM with DP, WM and VW as the paper's section 3.2 does; write tables and figures."""
     from engine.evaluation.pipeline import evaluate_set
@@ -202,7 +271,11 @@ def evaluate(
         fail(f"--target must be extreme or scale, got {target!r}")
     source_scale = check_scale("--source-scale", source_scale)
     target_scale = check_scale("--target-scale", target_scale)
-    for name, value, low in (("--levels", levels, 2), ("--crossing-step", crossing_step, 1), ("--table-contours", table_contours, 0)):
+    for name, value, low in (
+        ("--levels", levels, 2),
+        ("--crossing-step", crossing_step, 1),
+        ("--table-contours", table_contours, 0),
+    ):
         if value < low:
             fail(f"{name} must be >= {low}, got {value}")
     if sample is not None and sample < 1:
@@ -254,5 +327,3 @@ def evaluate(
         highlight=False,
         soft_wrap=True,
     )
-
-

@@ -112,7 +112,9 @@ def _check_level(i: int, levels: int) -> int:
 
 
 @njit(cache=True)
-def _walk_ranks(coords: Coords, flat: Coords, offsets: NDArray[np.intp]) -> NDArray[np.int32]:  # pragma: no cover - numba
+def _walk_ranks(
+    coords: Coords, flat: Coords, offsets: NDArray[np.intp]
+) -> NDArray[np.int32]:  # pragma: no cover - numba
     """Rank per vertex from nested ordered subsets, by one merge walk per level; -2 marks a failure."""
     n = coords.shape[0]
     rank = np.full(n, -1, dtype=np.int32)
@@ -120,7 +122,9 @@ def _walk_ranks(coords: Coords, flat: Coords, offsets: NDArray[np.intp]) -> NDAr
         j = 0
         for k in range(offsets[level], offsets[level + 1]):
             # Only the previous level's vertices are candidates (a contour may pass a point twice).
-            while j < n and (rank[j] != level - 1 or coords[j, 0] != flat[k, 0] or coords[j, 1] != flat[k, 1]):
+            while j < n and (
+                rank[j] != level - 1 or coords[j, 0] != flat[k, 0] or coords[j, 1] != flat[k, 1]
+            ):
                 j += 1
             if j == n:
                 rank[0] = -2

@@ -64,7 +64,9 @@ def headline_levels(levels: int) -> list[int]:
     return sorted({max(1, min(levels, round(k * levels / 100))) for k in HEADLINE_LEVELS})
 
 
-def write_report(ev: Evaluation, out_dir: str | Path, *, source: str = "", runtime_s: float | None = None) -> list[Path]:
+def write_report(
+    ev: Evaluation, out_dir: str | Path, *, source: str = "", runtime_s: float | None = None
+) -> list[Path]:
     """Write every table, figure and the summary into ``out_dir`` (created); returns the paths written."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -99,8 +101,18 @@ def write_report(ev: Evaluation, out_dir: str | Path, *, source: str = "", runti
     at = [int(np.argmax(np.abs(np.diff(mean[k])))) + 1 for k in range(len(methods))]
     _write_csv(
         out / "jumps.csv",
-        ["method", "contour_jump_mean", "contour_jump_median", "contour_jump_max", "mean_curve_jump", "mean_curve_jump_at_level"],
-        ([m, cj[:, k].mean(), float(np.median(cj[:, k])), cj[:, k].max(), mj[k], at[k]] for k, m in enumerate(methods)),
+        [
+            "method",
+            "contour_jump_mean",
+            "contour_jump_median",
+            "contour_jump_max",
+            "mean_curve_jump",
+            "mean_curve_jump_at_level",
+        ],
+        (
+            [m, cj[:, k].mean(), float(np.median(cj[:, k])), cj[:, k].max(), mj[k], at[k]]
+            for k, m in enumerate(methods)
+        ),
         comment="largest |Sim(i+1) - Sim(i)| per contour (mean/median/max over contours) and of the mean curve; "
         "jump_at_level = i of the pair (i, i+1), 1-based",
     )
@@ -150,9 +162,31 @@ def write_report(ev: Evaluation, out_dir: str | Path, *, source: str = "", runti
     pairs = [("dp", "ccsm"), ("dp", "wm"), ("wm", "ccsm"), ("vw", "ccsm"), ("vw", "dp"), ("vw", "wm")]
     _write_csv(
         out / "table2_maav.csv",
-        ["contour", "id", "n_vertices", "closed", "groups", *[f"sd_{a}_{b}" for a, b in pairs], "maav", "maav_with_vw", "below_0.002", "vw_in_window"],
+        [
+            "contour",
+            "id",
+            "n_vertices",
+            "closed",
+            "groups",
+            *[f"sd_{a}_{b}" for a, b in pairs],
+            "maav",
+            "maav_with_vw",
+            "below_0.002",
+            "vw_in_window",
+        ],
         (
-            [k + 1, t.contour_id, t.n_vertices, t.closed, len(t.groups), *[t.sd[idx[a], idx[b]] for a, b in pairs], t.maav, t.maav_with_vw, t.maav < SAME_SCALE_WINDOW, t.vw_in_window]
+            [
+                k + 1,
+                t.contour_id,
+                t.n_vertices,
+                t.closed,
+                len(t.groups),
+                *[t.sd[idx[a], idx[b]] for a, b in pairs],
+                t.maav,
+                t.maav_with_vw,
+                t.maav < SAME_SCALE_WINDOW,
+                t.vw_in_window,
+            ]
             for k, t in enumerate(tables)
         ),
         comment=f"paper eq. 11 over CCSM/DP/WM same-scale groups (window {SAME_SCALE_WINDOW}); VW = its level "
@@ -168,7 +202,13 @@ def write_report(ev: Evaluation, out_dir: str | Path, *, source: str = "", runti
     xs = np.arange(1, len(tables) + 1)
     w = 0.8 / len(methods)
     for k, m in enumerate(methods):
-        ax.bar(xs + (k - (len(methods) - 1) / 2) * w, [t.linear_density[m] for t in tables], w, label=LABELS[m], color=COLOURS[m])
+        ax.bar(
+            xs + (k - (len(methods) - 1) / 2) * w,
+            [t.linear_density[m] for t in tables],
+            w,
+            label=LABELS[m],
+            color=COLOURS[m],
+        )
     ax.set_xticks(xs)
     ax.set_xlabel("contour #")
     ax.set_ylabel("linear density (1/m)")
@@ -182,7 +222,17 @@ def write_report(ev: Evaluation, out_dir: str | Path, *, source: str = "", runti
     _write_csv(
         out / "table3_positional_error.csv",
         ["method", "mean_m", "std_m", "max_m", "n_errors", "results"],
-        ([m, errors[m].mean_m, errors[m].std_m, errors[m].max_m, errors[m].n, sum(len(t.groups) for t in tables)] for m in methods),
+        (
+            [
+                m,
+                errors[m].mean_m,
+                errors[m].std_m,
+                errors[m].max_m,
+                errors[m].n,
+                sum(len(t.groups) for t in tables),
+            ]
+            for m in methods
+        ),
         comment="eq. 13: distance of every initial vertex to the simplified polyline, pooled over the same-scale results",
     )
 
@@ -190,7 +240,9 @@ def write_report(ev: Evaluation, out_dir: str | Path, *, source: str = "", runti
     return [out / f for f in FILES]
 
 
-def _write_summary(path: Path, ev: Evaluation, source: str, runtime_s: float | None, mj: Any, cj: Any, errors: Any) -> None:
+def _write_summary(
+    path: Path, ev: Evaluation, source: str, runtime_s: float | None, mj: Any, cj: Any, errors: Any
+) -> None:
     methods = list(ev.methods)
     mean = ev.mean_curve()
     hl = headline_levels(ev.levels)
@@ -203,18 +255,44 @@ def _write_summary(path: Path, ev: Evaluation, source: str, runtime_s: float | N
         f"- levels per method: {ev.levels}; target: {ev.target}; seed: {ev.seed}",
     ]
     if runtime_s is not None:
-        lines.append(f"- runtime: {runtime_s:.1f} s (" + ", ".join(f"{k} {v:.1f} s" for k, v in ev.timings.items()) + ")")
-    lines += ["", "## Fig. 10: mean similarity by level", "", "| level | " + " | ".join(LABELS[m] for m in methods) + " |", "|---" * (len(methods) + 1) + "|"]
+        lines.append(
+            f"- runtime: {runtime_s:.1f} s ("
+            + ", ".join(f"{k} {v:.1f} s" for k, v in ev.timings.items())
+            + ")"
+        )
+    lines += [
+        "",
+        "## Fig. 10: mean similarity by level",
+        "",
+        "| level | " + " | ".join(LABELS[m] for m in methods) + " |",
+        "|---" * (len(methods) + 1) + "|",
+    ]
     for i in hl:
         lines.append(f"| {i} | " + " | ".join(f"{mean[k, i - 1]:.4f}" for k in range(len(methods))) + " |")
     rises = [float(np.max(np.diff(mean[k]))) for k in range(len(methods))]
-    lines += ["", "## Largest jump between consecutive levels", "", "| method | mean curve | per contour, mean | per contour, max | largest rise of the mean curve |", "|---|---|---|---|---|"]
+    lines += [
+        "",
+        "## Largest jump between consecutive levels",
+        "",
+        "| method | mean curve | per contour, mean | per contour, max | largest rise of the mean curve |",
+        "|---|---|---|---|---|",
+    ]
     for k, m in enumerate(methods):
-        lines.append(f"| {LABELS[m]} | {mj[k]:.4f} | {cj[:, k].mean():.4f} | {cj[:, k].max():.4f} | {max(rises[k], 0.0):.2e} |")
-    lines += ["", f"## Crossings between different contours (every {ev.crossing_step}th level)", "", "| method | levels with any | max pairs meeting | max pairs crossing |", "|---|---|---|---|"]
+        lines.append(
+            f"| {LABELS[m]} | {mj[k]:.4f} | {cj[:, k].mean():.4f} | {cj[:, k].max():.4f} | {max(rises[k], 0.0):.2e} |"
+        )
+    lines += [
+        "",
+        f"## Crossings between different contours (every {ev.crossing_step}th level)",
+        "",
+        "| method | levels with any | max pairs meeting | max pairs crossing |",
+        "|---|---|---|---|",
+    ]
     for m in methods:
         rows = [r for r in ev.crossings if r[0] == m]
-        lines.append(f"| {LABELS[m]} | {sum(1 for r in rows if r[2] > 0)} of {len(rows)} | {max(r[2] for r in rows)} | {max(r[3] for r in rows)} |")
+        lines.append(
+            f"| {LABELS[m]} | {sum(1 for r in rows if r[2] > 0)} of {len(rows)} | {max(r[2] for r in rows)} | {max(r[3] for r in rows)} |"
+        )
     tables = ev.table_contours
     if tables:
         maavs = [t.maav for t in tables]
@@ -227,7 +305,9 @@ def _write_summary(path: Path, ev: Evaluation, source: str, runtime_s: float | N
             f"- MAAV with VW: mean {np.mean([t.maav_with_vw for t in tables]):.5f}; VW members within the window: "
             f"{sum(t.vw_in_window for t in tables)} of {sum(len(t.groups) for t in tables)}",
             "- linear density (eq. 12, mean over contours, 1/m): "
-            + ", ".join(f"{LABELS[m]} {finite_mean([t.linear_density[m] for t in tables]):.5f}" for m in methods),
+            + ", ".join(
+                f"{LABELS[m]} {finite_mean([t.linear_density[m] for t in tables]):.5f}" for m in methods
+            ),
             "",
             "| method | positional error mean (m) | std (m) | max (m) |",
             "|---|---|---|---|",
@@ -236,5 +316,7 @@ def _write_summary(path: Path, ev: Evaluation, source: str, runtime_s: float | N
             e = errors[m]
             lines.append(f"| {LABELS[m]} | {e.mean_m:.2f} | {e.std_m:.2f} | {e.max_m:.2f} |")
         lines.append("")
-        lines.append(f"(The paper's Table 2 used the three methods {', '.join(LABELS[m] for m in PAPER_METHODS)}.)")
+        lines.append(
+            f"(The paper's Table 2 used the three methods {', '.join(LABELS[m] for m in PAPER_METHODS)}.)"
+        )
     path.write_text("\n".join(lines) + "\n")

@@ -66,9 +66,13 @@ def summary_counts(stdout: str) -> dict[str, int]:
 
 
 @pytest.mark.parametrize("method", ["ccsm", "dp", "wm", "vw"])
-def test_simplify_subset_writes_every_contour_with_properties(subset_path: Path, tmp_path: Path, method: str) -> None:
+def test_simplify_subset_writes_every_contour_with_properties(
+    subset_path: Path, tmp_path: Path, method: str
+) -> None:
     out = tmp_path / f"{method}.geojson"
-    result = run("simplify", subset_path, "--scale", "250000", "--method", method, "-o", out, "--workers", "1")
+    result = run(
+        "simplify", subset_path, "--scale", "250000", "--method", method, "-o", out, "--workers", "1"
+    )
     assert result.exit_code == 0, result.output
     counts = summary_counts(result.stdout)
     assert counts["written"] + counts["vanished"] + counts["bad"] == counts["input"] == SUBSET
@@ -99,7 +103,9 @@ def test_simplify_output_crs_3857_and_source(subset_path: Path, tmp_path: Path) 
 
 
 @pytest.mark.slow
-def test_simplify_whole_sample_at_source_scale_returns_the_input(sample_set: ContourSet, tmp_path: Path) -> None:
+def test_simplify_whole_sample_at_source_scale_returns_the_input(
+    sample_set: ContourSet, tmp_path: Path
+) -> None:
     out = tmp_path / "all.geojson"
     result = run("simplify", sample_contours_path(), "--scale", "50000", "-o", out, "--crs", "3857")
     assert result.exit_code == 0, result.output
@@ -138,7 +144,9 @@ def test_simplify_whole_sample_at_source_scale_returns_the_input(sample_set: Con
         (["evaluate", "{subset}", "--source-scale", "0"], "--source-scale"),
     ],
 )
-def test_bad_input_exits_2_with_a_message(subset_path: Path, tmp_path: Path, args: list[str], message: str) -> None:
+def test_bad_input_exits_2_with_a_message(
+    subset_path: Path, tmp_path: Path, args: list[str], message: str
+) -> None:
     argv = [a.replace("{subset}", str(subset_path)) for a in args]
     if argv[0] == "simplify":
         argv += ["-o", str(tmp_path / "o.geojson")]
@@ -163,7 +171,9 @@ def test_unreadable_file_exits_2(tmp_path: Path) -> None:
 @pytest.fixture(scope="module")
 def evaluation_dir(subset_path: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("eval")
-    result = run("evaluate", subset_path, "--out", out, "--levels", "100", "--table-contours", "5", "--seed", "3")
+    result = run(
+        "evaluate", subset_path, "--out", out, "--levels", "100", "--table-contours", "5", "--seed", "3"
+    )
     assert result.exit_code == 0, result.output
     return out
 
@@ -183,7 +193,11 @@ def test_evaluate_writes_every_file_and_valid_pngs(evaluation_dir: Path) -> None
 def test_evaluate_csv_columns(evaluation_dir: Path) -> None:
     fig10 = read_csv(evaluation_dir / "fig10_similarity.csv")
     assert len(fig10) == 100
-    assert list(fig10[0]) == ["level", *[f"{m}_mean" for m in ("ccsm", "dp", "wm", "vw")], *[f"{m}_std" for m in ("ccsm", "dp", "wm", "vw")]]
+    assert list(fig10[0]) == [
+        "level",
+        *[f"{m}_mean" for m in ("ccsm", "dp", "wm", "vw")],
+        *[f"{m}_std" for m in ("ccsm", "dp", "wm", "vw")],
+    ]
     jumps = read_csv(evaluation_dir / "jumps.csv")
     assert [r["method"] for r in jumps] == ["ccsm", "dp", "wm", "vw"]
     crossings = read_csv(evaluation_dir / "crossings.csv")
