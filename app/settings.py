@@ -17,7 +17,7 @@ from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 class Settings(BaseSettings):
     """Every setting of the service. Environment: ``CCSM_<FIELD>`` (case-insensitive), or a ``.env`` file."""
 
-    model_config = SettingsConfigDict(env_prefix="CCSM_", env_file=".env", extra="ignore")
+    model_config = SettingsConfigDict(env_prefix="CCSM_", env_file=".env", extra="ignore", env_ignore_empty=True)
 
     # -- data ---------------------------------------------------------------------------------------------
     store_path: Path = Field(Path("var/ccsm.sqlite"), description="The SQLite store file (created if missing).")
