@@ -19,6 +19,7 @@ from engine.errors import CCSMError
 from engine.params import BuildParams
 from engine.regression import ScaleModel, fit_scale_model
 from engine.tolerances import MIN_VISIBLE_RING_SIDE_M, min_ring_area_for_scale
+from engine.topology import crossing_pairs, find_new_crossings
 from engine.types import BadFeature, Contour, ContourSet
 
 #: Called with (contours done, contours in total) as the build goes.
@@ -207,37 +208,12 @@ def labels_of(
     return [int(labels[index[id(c)]]) for c, _ in pairs]
 
 
-def slices_at_ladder(surfaces: Sequence[CCS], k: int) -> list[np.ndarray]:
-    """Every surface sliced at its own t for ladder scale ``k``."""
-    return [s.at(float(s.t_at_scale[k])) for s in surfaces]
-
-
-def find_new_crossings(
-    surfaces: Sequence[CCS], model: ScaleModel, allowed: set[tuple[int, int]], only: set[int] | None = None
-) -> set[int]:
-    """Indices of surfaces whose slice crosses another visible slice at a checked scale, beyond ``allowed``.
-
-    ``only`` restricts the search to crossings that involve these surfaces (the ones just rebuilt).
-    """
-    from engine.topology import crossing_pairs
-
-    involved: set[int] = set()
-    ladder_steps = list(range(CHECK_EVERY, len(model.ladder), CHECK_EVERY))
-    if ladder_steps[-1:] != [len(model.ladder) - 1]:
-        ladder_steps.append(len(model.ladder) - 1)
-    vanish = np.array([s.vanish_scale for s in surfaces])
-    for k in ladder_steps:
-        scale = float(model.ladder[k])
-        visible = np.flatnonzero(vanish > scale)
-        local_only = None if only is None else {int(j) for j in np.flatnonzero(np.isin(visible, list(only)))}
-        if local_only is not None and not local_only:
-            continue
-        pairs = crossing_pairs(slices_at_ladder([surfaces[i] for i in visible], k), local_only)
-        for a, b in pairs:
-            pair = (int(visible[a]), int(visible[b]))
-            if pair not in allowed:
-                involved.update(pair)
-    return involved
+def checked_ladder_steps(model: ScaleModel) -> list[int]:
+    """Ladder indices at which slices are checked for crossings (every CHECK_EVERY-th, and the target)."""
+    steps = list(range(CHECK_EVERY, len(model.ladder), CHECK_EVERY))
+    if steps[-1:] != [len(model.ladder) - 1]:
+        steps.append(len(model.ladder) - 1)
+    return steps
 
 
 def resolve_crossings(
@@ -248,11 +224,10 @@ def resolve_crossings(
     Pairs of contours that already touch in the input are left alone: generalization cannot separate
     them and must not be blamed for them.
     """
-    from engine.topology import crossing_pairs
-
+    steps = checked_ladder_steps(model)
     allowed = crossing_pairs([s.at(0.0) for _, s in pairs])
     changed: set[int] = set()
-    involved = find_new_crossings([s for _, s in pairs], model, allowed)
+    involved = find_new_crossings([s for _, s in pairs], model.ladder, steps, allowed)
     for factor in REPAIR_FACTORS:
         if not involved:
             break
@@ -268,7 +243,9 @@ def resolve_crossings(
                 rebuilt_now.add(i)
         # Only the rebuilt contours can have made new crossings (or still have old ones).
         involved = (
-            find_new_crossings([s for _, s in pairs], model, allowed, rebuilt_now) if rebuilt_now else set()
+            find_new_crossings([s for _, s in pairs], model.ladder, steps, allowed, rebuilt_now)
+            if rebuilt_now
+            else set()
         )
     return len(changed)
 
