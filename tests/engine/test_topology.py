@@ -1,0 +1,68 @@
+"""Crossings between contours: detection, and the build's repair (DESIGN.md section 5)."""
+
+import numpy as np
+import pytest
+
+from engine.build import build_contour_set
+from engine.params import BuildParams
+from engine.regression import t_for_scale
+from engine.topology import crossing_pairs
+from engine.types import Contour, ContourSet
+
+
+def test_crossing_pairs_finds_crossing_and_touching_lines_but_not_disjoint_ones() -> None:
+    a = np.array([[0.0, 0.0], [10.0, 10.0]])
+    b = np.array([[0.0, 10.0], [10.0, 0.0]])  # crosses a
+    c = np.array([[20.0, 0.0], [30.0, 0.0]])  # far away
+    d = np.array([[30.0, 0.0], [30.0, 5.0]])  # touches c at its end
+    assert crossing_pairs([a, b, c, d]) == {(0, 1), (2, 3)}
+
+
+def test_crossing_pairs_sees_a_crossing_deep_inside_long_lines() -> None:
+    x = np.linspace(0.0, 10_000.0, 2001)
+    a = np.column_stack([x, np.zeros_like(x)])
+    b = np.column_stack([x, np.full_like(x, 1.0)])
+    b[1000, 1] = -1.0  # one vertex dips below a, far from both ends
+    assert crossing_pairs([a, b]) == {(0, 1)}
+    assert crossing_pairs([a, b], only={1}) == {(0, 1)}
+
+
+def nested_noisy_rings(n_rings: int = 6, gap_m: float = 20.0, seed: int = 3) -> ContourSet:
+    """Concentric rings 20 m apart with 8 m noise: DP at 50 m cuts chords through the neighbours."""
+    rng = np.random.default_rng(seed)
+    s = np.linspace(0.0, 2 * np.pi, 240, endpoint=False)
+    contours = []
+    for k in range(n_rings):
+        r = 1_000.0 + k * gap_m + rng.uniform(-6.0, 6.0, len(s))
+        xy = np.column_stack([r * np.cos(s), 0.6 * r * np.sin(s)]) + [500_000.0, 4_000_000.0]
+        contours.append(Contour(k, 100.0 + 20 * k, xy, closed=True))
+    return ContourSet(contours, "EPSG:32616", "EPSG:32616")
+
+
+def crossings_over_scales(built) -> int:  # type: ignore[no-untyped-def]
+    allowed = crossing_pairs([s.at(0.0) for s in built.surfaces])
+    found = set()
+    for scale in np.geomspace(built.model.source_scale, built.model.target_scale, 40):
+        visible = [s for s in built.surfaces if s.vanish_scale > scale]
+        lines = [s.at(t_for_scale(built.model.ladder, s.t_at_scale, float(scale))) for s in visible]
+        found |= {(visible[a].contour_id, visible[b].contour_id) for a, b in crossing_pairs(lines)}
+    return len(found - {(built.surfaces[a].contour_id, built.surfaces[b].contour_id) for a, b in allowed})
+
+
+@pytest.fixture(scope="module")
+def rings() -> ContourSet:
+    rings = nested_noisy_rings()
+    assert not crossing_pairs([np.vstack([c.coords, c.coords[:1]]) for c in rings.contours])
+    return rings
+
+
+def test_without_repair_the_dp_targets_of_close_contours_cross(rings: ContourSet) -> None:
+    built = build_contour_set(rings, BuildParams(resolve_crossings=False), workers=1)
+    assert crossings_over_scales(built) > 0
+
+
+def test_repair_leaves_no_crossing_at_any_scale(rings: ContourSet) -> None:
+    built = build_contour_set(rings, BuildParams(), workers=1)
+    assert built.repaired > 0
+    assert crossings_over_scales(built) == 0
+    assert all(0.0 <= s.tolerance_factor <= 1.0 for s in built.surfaces)
