@@ -32,9 +32,9 @@ from engine.tiles import (
     check_fractional_zoom,
     chunk_bounds,
     collinear_free,
-    row_runs,
+    row_runs_many,
     check_tile,
-    clip_to_grid,
+    clip_many,
     lonlat_to_mercator,
     mercator_to_lonlat,
     quantize,
@@ -221,7 +221,8 @@ def t_at_scales(ladder: NDArray[np.float64], tables: NDArray[np.float64], scale:
 def _significant(sig: NDArray[np.float32], a: int, b: int, min_sig: float) -> NDArray[np.intp]:
     """Indices in [a, b) of the rows more significant than ``min_sig``, both ends of the range included."""
     keep = sig[a:b] > min_sig
-    keep[0] = keep[-1] = True
+    keep[0] = True
+    keep[-1] = True
     return np.flatnonzero(keep) + a
 
 
@@ -364,28 +365,39 @@ class Renderer:
         part_t: list[float] = []
         # Rows whose significance is below half a grid unit cannot move the quantised line (engine.rowsig).
         min_sig = 0.5 * (box.maxx - box.minx) / (self.options.extent + 2 * self.options.buffer_px)
-        for i, p in enumerate(preps):
-            rec = p.rec
-            if method == "ccsm":
-                t = float(ts[i])
-                if t >= 1.0:  # the target contour: its straight runs need only their end rows
+        if method == "ccsm":
+            partial = []
+            for i, p in enumerate(preps):
+                if ts[i] >= 1.0:  # the target contour: its straight runs need only their end rows
                     bases.append(p.top_reduced)
                     tops.append(p.top_reduced)
                     owner.append(i)
                     part_t.append(0.0)
-                    continue
-                for a, b in row_runs(p.chunks, box, len(rec.base)):
+                else:
+                    partial.append(i)
+            if partial:
+                lines, starts, ends = row_runs_many(
+                    [preps[i].chunks for i in partial], [len(preps[i].rec.base) for i in partial], box
+                )
+                for j, a, b in zip(lines.tolist(), starts.tolist(), ends.tolist(), strict=True):
+                    i = partial[j]
+                    rec = preps[i].rec
                     rows = _significant(rec.sig, a, b, min_sig)
                     bases.append(rec.base[rows])
                     tops.append(rec.top[rows])
                     owner.append(i)
-                    part_t.append(t)
-            elif method == "original":
-                for a, b in row_runs(p.original_chunks, box, len(rec.original)):
-                    bases.append(rec.original[_significant(rec.sig_original, a, b, min_sig)])
-                    owner.append(i)
-            else:
-                bases.append(self._baseline(info, rec, method, scale)[0])
+                    part_t.append(float(ts[i]))
+        elif method == "original":
+            lines, starts, ends = row_runs_many(
+                [p.original_chunks for p in preps], [len(p.rec.original) for p in preps], box
+            )
+            for i, a, b in zip(lines.tolist(), starts.tolist(), ends.tolist(), strict=True):
+                rec = preps[i].rec
+                bases.append(rec.original[_significant(rec.sig_original, a, b, min_sig)])
+                owner.append(i)
+        else:
+            for i, p in enumerate(preps):
+                bases.append(self._baseline(info, p.rec, method, scale)[0])
                 owner.append(i)
         if not bases:
             empty = np.zeros(0, dtype=np.int64)
@@ -517,15 +529,23 @@ class Renderer:
         new_lens_l = new_lens.tolist()
         new_starts_l = new_starts.tolist()
         by_owner: dict[int, list[NDArray[np.int64]]] = {}
+        to_clip: list[NDArray[np.int64]] = []
+        to_clip_owner: list[int] = []
         for k, i in enumerate(owner.tolist()):
             n = new_lens_l[k]
             if n < 2:
                 continue
             s = new_starts_l[k]
             line = q[s : s + n]
-            parts = [line] if inside[k] else clip_to_grid(line, lo, hi)
+            if inside[k]:
+                by_owner.setdefault(i, []).append(line)
+            else:
+                to_clip.append(line)
+                to_clip_owner.append(i)
+        for i, parts in zip(to_clip_owner, clip_many(to_clip, lo, hi), strict=True):
             if parts:
                 by_owner.setdefault(i, []).extend(parts)
+        by_owner = dict(sorted(by_owner.items()))
         features = []
         index_cache: dict[float, bool] = {}
         for i, parts in by_owner.items():

@@ -230,3 +230,54 @@ def collinear_free(rows: NDArray[np.float64], rel_tol: float = 1e-9) -> NDArray[
     scale = np.hypot(*a.T) * np.hypot(*b.T)
     turn = (np.abs(cross) > rel_tol * scale) | (dot <= 0)
     return np.concatenate([[0], np.flatnonzero(turn) + 1, [len(rows) - 1]])
+
+
+def clip_many(lines: Sequence[NDArray[np.int64]], lo: int, hi: int) -> list[list[NDArray[np.int64]]]:
+    """:func:`clip_to_grid` of many integer polylines in one vectorised shapely call; pieces per input line."""
+    out: list[list[NDArray[np.int64]]] = [[] for _ in lines]
+    if not lines:
+        return out
+    lens = np.fromiter((len(v) for v in lines), dtype=np.int64, count=len(lines))
+    coords = np.concatenate(lines).astype(np.float64)
+    geoms = shapely.linestrings(coords, indices=np.repeat(np.arange(len(lines)), lens))
+    clipped = shapely.clip_by_rect(geoms, lo, lo, hi, hi)
+    parts, src = shapely.get_parts(clipped, return_index=True)
+    is_line = shapely.get_type_id(parts) == 1
+    parts, src = parts[is_line], src[is_line]
+    if len(parts) == 0:
+        return out
+    xy, which = shapely.get_coordinates(parts, return_index=True)
+    q = np.rint(xy).astype(np.int64)
+    keep = np.ones(len(q), dtype=bool)
+    keep[1:] = np.any(q[1:] != q[:-1], axis=1) | (which[1:] != which[:-1])
+    q, which = q[keep], which[keep]
+    counts = np.bincount(which, minlength=len(parts))
+    starts = np.cumsum(counts) - counts
+    for p, (s, n) in enumerate(zip(starts.tolist(), counts.tolist(), strict=True)):
+        if n >= 2:
+            out[int(src[p])].append(q[s : s + n])
+    return out
+
+
+def row_runs_many(
+    chunks: Sequence[NDArray[np.float64]], sizes: Sequence[int], box: Bounds, size: int = CHUNK_ROWS
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """:func:`row_runs` of many lines at once: (line index, first row, end row) of every run."""
+    counts = np.fromiter((len(c) for c in chunks), dtype=np.int64, count=len(chunks))
+    allc = np.concatenate(chunks)
+    owner = np.repeat(np.arange(len(chunks)), counts)
+    offset = np.cumsum(counts) - counts
+    hit = (allc[:, 2] >= box.minx) & (allc[:, 0] <= box.maxx) & (allc[:, 3] >= box.miny) & (allc[:, 1] <= box.maxy)
+    idx = np.flatnonzero(hit)
+    if len(idx) == 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, empty
+    own = owner[idx]
+    cut = np.flatnonzero((np.diff(idx) > 1) | (np.diff(own) != 0))
+    firsts = np.concatenate([idx[:1], idx[cut + 1]])
+    lasts = np.concatenate([idx[cut], idx[-1:]])
+    lines = owner[firsts]
+    m = np.asarray(sizes, dtype=np.int64)[lines]
+    a = (firsts - offset[lines]) * size
+    b = np.minimum((lasts - offset[lines] + 1) * size + 1, m)
+    return lines, a, b
