@@ -39,13 +39,19 @@ class TileQuery:
     ] = None
     method: Annotated[
         MethodName,
-        Query(description="ccsm (continuous), dp (Douglas-Peucker), wm (Wang-Mueller), vw (Visvalingam-Whyatt) "
-              "at the tile's scale, or original (no simplification)."),
+        Query(
+            description="ccsm (continuous), dp (Douglas-Peucker), wm (Wang-Mueller), vw (Visvalingam-Whyatt) "
+            "at the tile's scale, or original (no simplification)."
+        ),
     ] = "ccsm"
     t: Annotated[
         float | None,
-        Query(description="Pin t in [0, 1] for every contour (method=ccsm only); default: from the tile's scale.",
-              ge=0, le=1, allow_inf_nan=False),
+        Query(
+            description="Pin t in [0, 1] for every contour (method=ccsm only); default: from the tile's scale.",
+            ge=0,
+            le=1,
+            allow_inf_nan=False,
+        ),
     ] = None
     v: Annotated[
         int | None,

@@ -108,7 +108,11 @@ async def validation_error_handler(request: Request, exc: Exception) -> JSONResp
     """422 with the list of bad parameters (location, message), without echoing internals."""
     errors = exc.errors() if isinstance(exc, RequestValidationError) else []
     detail = [
-        {"loc": [str(p) for p in e.get("loc", ())], "msg": public_message(str(e.get("msg", ""))), "type": e.get("type")}
+        {
+            "loc": [str(p) for p in e.get("loc", ())],
+            "msg": public_message(str(e.get("msg", ""))),
+            "type": e.get("type"),
+        }
         for e in errors
     ]
     return JSONResponse(error_body(request, "invalid_request", detail), 422)
@@ -119,7 +123,9 @@ async def http_error_handler(request: Request, exc: Exception) -> JSONResponse:
     status = getattr(exc, "status_code", 500)
     detail = getattr(exc, "detail", "error")
     headers = getattr(exc, "headers", None)
-    return JSONResponse(error_body(request, "http_error", public_message(str(detail))), status, headers=headers)
+    return JSONResponse(
+        error_body(request, "http_error", public_message(str(detail))), status, headers=headers
+    )
 
 
 async def unexpected_error_handler(request: Request, exc: Exception) -> JSONResponse:
@@ -127,7 +133,9 @@ async def unexpected_error_handler(request: Request, exc: Exception) -> JSONResp
     log.error("request %s %s %s failed", request_id(request), request.method, request.url.path, exc_info=exc)
     # This handler runs outside the request-id middleware (in Starlette's ServerErrorMiddleware): set it here.
     rid = request_id(request)
-    return JSONResponse(error_body(request, "internal_error", "internal server error"), 500, headers={"X-Request-ID": rid})
+    return JSONResponse(
+        error_body(request, "internal_error", "internal server error"), 500, headers={"X-Request-ID": rid}
+    )
 
 
 def add_exception_handlers(app: FastAPI) -> None:

@@ -38,6 +38,7 @@ class RequestIdMiddleware:
         self.app = app
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        """Tag the request and its response with the id."""
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
@@ -62,7 +63,9 @@ class RequestIdMiddleware:
 def create_app(settings: Settings | None = None) -> FastAPI:
     """Build the application from settings (read from the environment when None)."""
     settings = settings or Settings()
-    logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        level=settings.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s"
+    )
     app = FastAPI(
         title="ccsm",
         description=DESCRIPTION,

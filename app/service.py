@@ -155,7 +155,12 @@ class DatasetService:
             )
             self.store.clear_build_status(spec.dataset)
             self.renderer.forget(spec.dataset)
-            log.info("dataset %s %s (%d contours)", spec.dataset, "built" if rebuilt else "current", info.n_contours)
+            log.info(
+                "dataset %s %s (%d contours)",
+                spec.dataset,
+                "built" if rebuilt else "current",
+                info.n_contours,
+            )
         except Exception as exc:  # a failed build is reported on the dataset, the service keeps running
             message = public_message(str(exc)) if isinstance(exc, CCSMError) else "build failed (see the log)"
             log.error("building %s failed", spec.dataset, exc_info=exc)
@@ -188,7 +193,9 @@ class DatasetService:
         except (UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise MalformedUpload(f"the body is not valid JSON ({exc})") from None
         if not isinstance(doc, dict) or doc.get("type") not in ("FeatureCollection", "Feature"):
-            raise MalformedUpload("the body must be a GeoJSON FeatureCollection (or Feature) of contour lines")
+            raise MalformedUpload(
+                "the body must be a GeoJSON FeatureCollection (or Feature) of contour lines"
+            )
         if doc["type"] == "FeatureCollection" and not isinstance(doc.get("features"), list):
             raise MalformedUpload("a FeatureCollection needs a 'features' array")
         params = {
@@ -217,7 +224,10 @@ class DatasetService:
         """Build a validated upload in the background (one process: the server keeps the other cores)."""
         self.store.set_build_status(upload.dataset, "building", 0, len(contour_set.contours))
         thread = threading.Thread(
-            target=self._build_upload, args=(upload, contour_set), name=f"ccsm-upload-{upload.dataset}", daemon=True
+            target=self._build_upload,
+            args=(upload, contour_set),
+            name=f"ccsm-upload-{upload.dataset}",
+            daemon=True,
         )
         self._threads.append(thread)
         thread.start()
@@ -235,8 +245,14 @@ class DatasetService:
             if self._building(upload.dataset) is None:  # deleted while building
                 return
             self.store.save(
-                upload.dataset, built, contour_set.contours, name=upload.name, source="upload",
-                source_hash=upload.digest, params=upload.params, build_seconds=time.perf_counter() - started,
+                upload.dataset,
+                built,
+                contour_set.contours,
+                name=upload.name,
+                source="upload",
+                source_hash=upload.digest,
+                params=upload.params,
+                build_seconds=time.perf_counter() - started,
             )
             self.store.clear_build_status(upload.dataset)
         except Exception as exc:
@@ -267,7 +283,9 @@ class DatasetService:
         if status is not None:
             if status.state == "failed":
                 raise StoreNotReady(f"dataset {dataset!r} failed to build: {status.error}")
-            raise StoreNotReady(f"dataset {dataset!r} is still being built ({status.done}/{status.total} contours)")
+            raise StoreNotReady(
+                f"dataset {dataset!r} is still being built ({status.done}/{status.total} contours)"
+            )
         raise UnknownLayer(f"unknown dataset {dataset!r}")
 
     def default_dataset(self) -> str:
@@ -308,8 +326,14 @@ class DatasetService:
         out["build"] = (
             None
             if status is None
-            else {"state": status.state, "done": status.done, "total": status.total, "error": status.error,
-                  "started": status.started, "updated": status.updated}
+            else {
+                "state": status.state,
+                "done": status.done,
+                "total": status.total,
+                "error": status.error,
+                "started": status.started,
+                "updated": status.updated,
+            }
         )
         if self.store.data_version(dataset) is None:
             return out
@@ -329,7 +353,12 @@ def lonlat_bounds(info: DatasetInfo) -> list[float]:
     """[west, south, east, north] of a dataset, degrees."""
     minx, miny, maxx, maxy = info.bounds_3857
     lon, lat = mercator_to_lonlat(np.array([minx, maxx]), np.array([miny, maxy]))
-    return [round(float(lon[0]), 6), round(float(lat[0]), 6), round(float(lon[1]), 6), round(float(lat[1]), 6)]
+    return [
+        round(float(lon[0]), 6),
+        round(float(lat[0]), 6),
+        round(float(lon[1]), 6),
+        round(float(lat[1]), 6),
+    ]
 
 
 def describe(info: DatasetInfo, interval: float | None, settings: Settings) -> dict[str, Any]:
@@ -341,8 +370,12 @@ def describe(info: DatasetInfo, interval: float | None, settings: Settings) -> d
         "data_version": info.data_version,
         "bounds": bounds,
         "center": [round((bounds[0] + bounds[2]) / 2, 6), round(lat, 6)],
-        "counts": {"contours": info.n_contours, "closed": info.n_closed, "vertices": info.n_vertices,
-                   "bad_features": len(info.bad_features)},
+        "counts": {
+            "contours": info.n_contours,
+            "closed": info.n_closed,
+            "vertices": info.n_vertices,
+            "bad_features": len(info.bad_features),
+        },
         "interval": interval,
         "scales": {
             "source_scale": info.source_scale,

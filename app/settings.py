@@ -17,30 +17,46 @@ from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 class Settings(BaseSettings):
     """Every setting of the service. Environment: ``CCSM_<FIELD>`` (case-insensitive), or a ``.env`` file."""
 
-    model_config = SettingsConfigDict(env_prefix="CCSM_", env_file=".env", extra="ignore", env_ignore_empty=True)
+    model_config = SettingsConfigDict(
+        env_prefix="CCSM_", env_file=".env", extra="ignore", env_ignore_empty=True
+    )
 
     # -- data ---------------------------------------------------------------------------------------------
-    store_path: Path = Field(Path("var/ccsm.sqlite"), description="The SQLite store file (created if missing).")
+    store_path: Path = Field(
+        Path("var/ccsm.sqlite"), description="The SQLite store file (created if missing)."
+    )
     sources: Annotated[list[str], NoDecode] = Field(
         default_factory=list,
         description="Contour files or DEMs to serve, comma-separated; empty = the bundled sample.",
     )
     serve_sample: bool = Field(True, description="Serve the bundled sample when no source is given.")
-    elevation_field: str | None = Field(None, description="Elevation attribute of contour files (found by name if unset).")
+    elevation_field: str | None = Field(
+        None, description="Elevation attribute of contour files (found by name if unset)."
+    )
     interval: float | None = Field(None, gt=0, description="Contour interval; required for a DEM source.")
     source_scale: float = Field(50_000.0, gt=0, description="Scale denominator of the sources (t = 0).")
-    target_scale: float = Field(500_000.0, gt=0, description="Scale denominator of the most generalized contours (t = 1).")
+    target_scale: float = Field(
+        500_000.0, gt=0, description="Scale denominator of the most generalized contours (t = 1)."
+    )
     build_workers: int | None = Field(None, ge=1, description="Processes per build; unset = one per core.")
-    build_on_start: bool = Field(True, description="Build missing or changed sources at startup, in the background.")
+    build_on_start: bool = Field(
+        True, description="Build missing or changed sources at startup, in the background."
+    )
 
     # -- tiles --------------------------------------------------------------------------------------------
     min_zoom: int = Field(0, ge=0, le=30, description="Smallest tile zoom served.")
     max_zoom: int = Field(16, ge=0, le=30, description="Largest tile zoom served.")
     tile_extent: int = Field(4096, ge=256, le=65536, description="MVT grid size.")
     tile_buffer: int = Field(64, ge=0, le=1024, description="MVT buffer around a tile, grid units.")
-    cache_max_age: int = Field(3600, ge=0, description="Cache-Control max-age of tiles, TileJSON and /simplify, seconds.")
-    contour_cache_mb: int = Field(512, ge=1, description="Memory for decoded contours per worker process, MB.")
-    baseline_cache_entries: int = Field(100_000, ge=1, description="Cached DP/VW/WM results per worker process.")
+    cache_max_age: int = Field(
+        3600, ge=0, description="Cache-Control max-age of tiles, TileJSON and /simplify, seconds."
+    )
+    contour_cache_mb: int = Field(
+        512, ge=1, description="Memory for decoded contours per worker process, MB."
+    )
+    baseline_cache_entries: int = Field(
+        100_000, ge=1, description="Cached DP/VW/WM results per worker process."
+    )
 
     # -- API ----------------------------------------------------------------------------------------------
     cors_origins: Annotated[list[str], NoDecode] = Field(
@@ -67,7 +83,9 @@ class Settings(BaseSettings):
         if self.min_zoom > self.max_zoom:
             raise ValueError(f"min_zoom {self.min_zoom} > max_zoom {self.max_zoom}")
         if self.target_scale <= self.source_scale:
-            raise ValueError(f"target_scale {self.target_scale:g} must exceed source_scale {self.source_scale:g}")
+            raise ValueError(
+                f"target_scale {self.target_scale:g} must exceed source_scale {self.source_scale:g}"
+            )
         return self
 
     @property

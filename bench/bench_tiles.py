@@ -50,17 +50,25 @@ def build_stores() -> tuple[Path, Path]:
     t0 = time.perf_counter()
     built = build_contour_set(cs)
     print(f"build of the sample: {time.perf_counter() - t0:.1f} s ({len(built.surfaces)} contours)")
-    CCSStore(one).save("sample", built, cs.contours, name="sample", source="sample", source_hash="1x", params={})
+    CCSStore(one).save(
+        "sample", built, cs.contours, name="sample", source="sample", source_hash="1x", params={}
+    )
     surfaces, contours = [], []
     for i in range(4):
         for j in range(4):
             off = np.array([i * 40_000.0, j * 40_000.0])
             for s in built.surfaces:
-                surfaces.append(dataclasses.replace(s, contour_id=f"{i}{j}:{s.contour_id}", base=s.base + off, top=s.top + off))
+                surfaces.append(
+                    dataclasses.replace(
+                        s, contour_id=f"{i}{j}:{s.contour_id}", base=s.base + off, top=s.top + off
+                    )
+                )
             for c in cs.contours:
                 contours.append(Contour(f"{i}{j}:{c.id}", c.elevation, c.coords + off, c.closed))
     big = dataclasses.replace(built, surfaces=surfaces)
-    CCSStore(many).save("sample", big, contours, name="sample16", source="sample", source_hash="16x", params={})
+    CCSStore(many).save(
+        "sample", big, contours, name="sample16", source="sample", source_hash="16x", params={}
+    )
     return one, many
 
 
@@ -75,12 +83,31 @@ def pct(values: list[float]) -> str:
 
 class Server:
     def __init__(self, store: Path, workers: int, port: int) -> None:
-        env = {**os.environ, "CCSM_STORE_PATH": str(store), "CCSM_SERVE_SAMPLE": "false", "CCSM_BUILD_ON_START": "false"}
+        env = {
+            **os.environ,
+            "CCSM_STORE_PATH": str(store),
+            "CCSM_SERVE_SAMPLE": "false",
+            "CCSM_BUILD_ON_START": "false",
+        }
         self.url = f"http://127.0.0.1:{port}"
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "uvicorn", "app.main:app", "--port", str(port), "--workers", str(workers),
-             "--log-level", "warning", "--no-access-log"],
-            env=env, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            [
+                sys.executable,
+                "-m",
+                "uvicorn",
+                "app.main:app",
+                "--port",
+                str(port),
+                "--workers",
+                str(workers),
+                "--log-level",
+                "warning",
+                "--no-access-log",
+            ],
+            env=env,
+            cwd=REPO,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
         )
         for _ in range(300):
             try:
@@ -114,7 +141,10 @@ class Server:
 
 async def throughput(url: str, paths: list[str], concurrency: int = 8, headers: dict | None = None) -> float:
     queue = list(paths)
-    async with httpx.AsyncClient(base_url=url, timeout=60, limits=httpx.Limits(max_connections=concurrency)) as c:
+    async with httpx.AsyncClient(
+        base_url=url, timeout=60, limits=httpx.Limits(max_connections=concurrency)
+    ) as c:
+
         async def worker() -> None:
             while queue:
                 p = queue.pop()
@@ -137,11 +167,15 @@ def main() -> None:
     zooms = range(8, 14 if args.quick else 16)
     tiles = pyramid(info.bounds_3857, zooms)
     paths = [f"/tiles/sample/{z}/{x}/{y}.mvt" for z, x, y in tiles]
-    print(f"\n== uncached tile latency over HTTP, 1 worker, z{zooms.start}-z{zooms.stop - 1} ({len(tiles)} tiles) ==")
+    print(
+        f"\n== uncached tile latency over HTTP, 1 worker, z{zooms.start}-z{zooms.stop - 1} ({len(tiles)} tiles) =="
+    )
     srv = Server(one, 1, 18731)
     try:
         with httpx.Client(base_url=srv.url, timeout=60) as c:
-            for p in paths:  # warm the per-process contour cache once (disk -> memory), as a running server is
+            for (
+                p
+            ) in paths:  # warm the per-process contour cache once (disk -> memory), as a running server is
                 c.get(p)
             per_zoom: dict[int, list[float]] = {}
             for (z, _, _), p in zip(tiles, paths, strict=True):
@@ -158,7 +192,9 @@ def main() -> None:
                 if "etag" in r.headers:
                     etag_paths.append((p, r.headers["etag"]))
         rps1 = asyncio.run(throughput(srv.url, paths * 2))
-        cached = asyncio.run(throughput(srv.url, [p for p, _ in etag_paths] * 20, headers={"if-none-match": "*"}))
+        cached = asyncio.run(
+            throughput(srv.url, [p for p, _ in etag_paths] * 20, headers={"if-none-match": "*"})
+        )
         mem1 = srv.rss_mb()
     finally:
         srv.stop()
@@ -184,18 +220,26 @@ def main() -> None:
     for t in full:
         cold.tile("sample", *t)
     t_warm = time.perf_counter() - t0
-    print(f"ccsm      : {len(full)} tiles ({n_ok} non-empty): {t_cold:6.2f} s cold store, {t_warm:6.2f} s warm")
+    print(
+        f"ccsm      : {len(full)} tiles ({n_ok} non-empty): {t_cold:6.2f} s cold store, {t_warm:6.2f} s warm"
+    )
     node_dir = REPO / "bench" / "geojsonvt"
     if shutil.which("node") and (node_dir / "node_modules" / "geojson-vt").is_dir():
         with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as fh:
             json.dump(full, fh)
-        out = subprocess.run(["node", str(node_dir / "tile_pyramid.mjs"), str(sample_contours_path()), fh.name],
-                             capture_output=True, text=True, check=True)
+        out = subprocess.run(
+            ["node", str(node_dir / "tile_pyramid.mjs"), str(sample_contours_path()), fh.name],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
         gv = json.loads(out.stdout)
         g = gv["total_ms"] / 1000
-        print(f"geojson-vt: {gv['tiles']} tiles ({gv['non_empty']} non-empty): {g:6.2f} s "
-              f"(index {gv['index_ms'] / 1000:.2f} s + tiles and vt-pbf {gv['tiles_ms'] / 1000:.2f} s; JSON parse "
-              f"{gv['parse_ms'] / 1000:.2f} s not counted)")
+        print(
+            f"geojson-vt: {gv['tiles']} tiles ({gv['non_empty']} non-empty): {g:6.2f} s "
+            f"(index {gv['index_ms'] / 1000:.2f} s + tiles and vt-pbf {gv['tiles_ms'] / 1000:.2f} s; JSON parse "
+            f"{gv['parse_ms'] / 1000:.2f} s not counted)"
+        )
         print(f"ratio ccsm / geojson-vt: {t_cold / g:.2f} (cold), {t_warm / g:.2f} (warm); goal <= 2")
     else:
         print("geojson-vt: skipped (run `npm ci` in bench/geojsonvt)")

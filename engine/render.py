@@ -30,14 +30,14 @@ from engine.tiles import (
     Tile,
     buffered,
     check_fractional_zoom,
-    chunk_bounds,
-    collinear_free,
-    row_runs_many,
     check_tile,
+    chunk_bounds,
     clip_many,
+    collinear_free,
     lonlat_to_mercator,
     mercator_to_lonlat,
     quantize,
+    row_runs_many,
     tile_bounds,
     tile_center_latitude,
 )
@@ -179,7 +179,9 @@ def check_bbox(bbox: Sequence[float]) -> Bounds:
     if not all(math.isfinite(v) for v in (w, s, e, n)):
         raise InvalidParameter("bbox values must be finite numbers")
     if not (-180 <= w <= 180 and -180 <= e <= 180 and -90 <= s <= 90 and -90 <= n <= 90):
-        raise InvalidParameter(f"bbox {w},{s},{e},{n} lies outside longitude [-180, 180] / latitude [-90, 90]")
+        raise InvalidParameter(
+            f"bbox {w},{s},{e},{n} lies outside longitude [-180, 180] / latitude [-90, 90]"
+        )
     if w > e or s > n:
         raise InvalidParameter(f"bbox {w},{s},{e},{n} has min > max (expected west,south,east,north)")
     return Bounds(w, s, e, n)
@@ -202,7 +204,9 @@ def is_index(elevation: float, interval: float | None) -> bool:
     return abs(q - round(q)) < 1e-6
 
 
-def t_at_scales(ladder: NDArray[np.float64], tables: NDArray[np.float64], scale: float) -> NDArray[np.float64]:
+def t_at_scales(
+    ladder: NDArray[np.float64], tables: NDArray[np.float64], scale: float
+) -> NDArray[np.float64]:
     """Each row of ``tables`` ((n, S) t at the ladder's scales) interpolated at one scale, as ``t_for_scale``.
 
     The interpolation weights depend on the ladder and the scale only, so they are found once for all rows.
@@ -276,8 +280,12 @@ class Renderer:
     ) -> None:
         self.store = store
         self.options = options or TileOptions()
-        self.contours: LRUCache[int, PreparedContour] = LRUCache(contour_cache_bytes, lambda r: r.nbytes + 1024)
-        self.baselines: LRUCache[tuple[int, str, int], tuple[Coords, Coords]] = LRUCache(baseline_cache_entries)
+        self.contours: LRUCache[int, PreparedContour] = LRUCache(
+            contour_cache_bytes, lambda r: r.nbytes + 1024
+        )
+        self.baselines: LRUCache[tuple[int, str, int], tuple[Coords, Coords]] = LRUCache(
+            baseline_cache_entries
+        )
         self._info: dict[str, tuple[DatasetInfo, float | None]] = {}
         self._transformers: dict[str, Callable[[Any], Coords]] = {}
 
@@ -298,7 +306,14 @@ class Renderer:
         interval = info.interval
         if not interval:
             con = self.store._con()
-            elev = np.array([r[0] for r in con.execute("SELECT DISTINCT elevation FROM contours WHERE dataset=?", (dataset,))])
+            elev = np.array(
+                [
+                    r[0]
+                    for r in con.execute(
+                        "SELECT DISTINCT elevation FROM contours WHERE dataset=?", (dataset,)
+                    )
+                ]
+            )
             interval = infer_interval(elev) if len(elev) else None
         self._info[dataset] = (info, interval)
         return info, interval
@@ -323,7 +338,9 @@ class Renderer:
         return [r for r in out if r is not None]
 
     # -- geometry per method -----------------------------------------------------------------------------
-    def _baseline(self, info: DatasetInfo, rec: ContourRecord, method: str, scale: float) -> tuple[Coords, Coords]:
+    def _baseline(
+        self, info: DatasetInfo, rec: ContourRecord, method: str, scale: float
+    ) -> tuple[Coords, Coords]:
         """(EPSG:3857 closed path, working-CRS coordinates) of a baseline's result at a scale (cached)."""
         from engine.baselines import simplify_at_scale
 
@@ -333,7 +350,9 @@ class Renderer:
         if hit is not None:
             return hit
         snapped = 2.0 ** (step / SCALE_STEPS_PER_OCTAVE)
-        result_w = np.asarray(simplify_at_scale(method, rec.original_w, rec.closed, snapped), dtype=np.float64)
+        result_w = np.asarray(
+            simplify_at_scale(method, rec.original_w, rec.closed, snapped), dtype=np.float64
+        )
         tr = self._transformers.get(info.working_crs)
         if tr is None:
             tr = self._transformers[info.working_crs] = make_transformer(info.working_crs, WEB_MERCATOR)
@@ -418,7 +437,9 @@ class Renderer:
             return list(range(len(recs)))
         return [i for i, r in enumerate(recs) if scale < r.vanish_scale]
 
-    def _t_values(self, info: DatasetInfo, recs: Sequence[ContourRecord], scale: float, t: float | None) -> NDArray[np.float64]:
+    def _t_values(
+        self, info: DatasetInfo, recs: Sequence[ContourRecord], scale: float, t: float | None
+    ) -> NDArray[np.float64]:
         if t is not None:
             return np.full(len(recs), t)
         if not recs:
@@ -555,7 +576,9 @@ class Renderer:
             if idx is None:
                 idx = index_cache[elev] = is_index(elev, interval)
             features.append(
-                LineFeature(rec.fid, parts, {"elevation": elev, "index": idx, "t": round(float(ts[i]), T_DECIMALS)})
+                LineFeature(
+                    rec.fid, parts, {"elevation": elev, "index": idx, "t": round(float(ts[i]), T_DECIMALS)}
+                )
             )
         return features
 
@@ -612,14 +635,20 @@ class Renderer:
             lon, lat = mercator_to_lonlat(xy[:, 0], xy[:, 1])
             out.append(
                 SimplifiedContour(
-                    rec.fid, rec.contour_id, float(rec.elevation), round(float(t), T_DECIMALS), sim,
+                    rec.fid,
+                    rec.contour_id,
+                    float(rec.elevation),
+                    round(float(t), T_DECIMALS),
+                    sim,
                     np.column_stack([lon, lat]),
                 )
             )
         return out
 
 
-def feature_collection(contours: Sequence[SimplifiedContour], scale: float, method: str, decimals: int = 7) -> dict[str, Any]:
+def feature_collection(
+    contours: Sequence[SimplifiedContour], scale: float, method: str, decimals: int = 7
+) -> dict[str, Any]:
     """A GeoJSON FeatureCollection (RFC 7946, EPSG:4326) of /simplify results."""
     return {
         "type": "FeatureCollection",
@@ -635,7 +664,10 @@ def feature_collection(contours: Sequence[SimplifiedContour], scale: float, meth
                     "scale": scale,
                     "method": method,
                 },
-                "geometry": {"type": "LineString", "coordinates": np.round(c.coords_lonlat, decimals).tolist()},
+                "geometry": {
+                    "type": "LineString",
+                    "coordinates": np.round(c.coords_lonlat, decimals).tolist(),
+                },
             }
             for c in contours
         ],

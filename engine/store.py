@@ -105,7 +105,9 @@ CREATE TABLE IF NOT EXISTS builds(
 """
 
 
-def source_hash(path: str | os.PathLike[str] | None, params: dict[str, Any], data: bytes | None = None) -> str:
+def source_hash(
+    path: str | os.PathLike[str] | None, params: dict[str, Any], data: bytes | None = None
+) -> str:
     """SHA-256 of a source's bytes (a file's content or ``data``), its build parameters and the store format."""
     h = hashlib.sha256()
     h.update(f"ccsm-store-{STORE_FORMAT}\n".encode())
@@ -398,7 +400,9 @@ class CCSStore:
             base, top = both[:m], both[m:]
             key = (ccs.contour_id, float(ccs.elevation), int(ccs.n_input_vertices))
             if key not in originals:
-                raise StoreError(f"contour {ccs.contour_id!r}: its input coordinates were not passed to save()")
+                raise StoreError(
+                    f"contour {ccs.contour_id!r}: its input coordinates were not passed to save()"
+                )
             original_w = np.asarray(originals[key], dtype=np.float64)
             original = to_3857(closed_path(original_w) if ccs.closed else original_w)
             if not (np.isfinite(both).all() and np.isfinite(original).all()):
@@ -431,13 +435,20 @@ class CCSStore:
             )
         if boxes:
             arr = np.array(boxes)
-            bounds = (float(arr[:, 0].min()), float(arr[:, 2].min()), float(arr[:, 1].max()), float(arr[:, 3].max()))
+            bounds = (
+                float(arr[:, 0].min()),
+                float(arr[:, 2].min()),
+                float(arr[:, 1].max()),
+                float(arr[:, 3].max()),
+            )
         else:
             bounds = (0.0, 0.0, 0.0, 0.0)
         bad = [_bad_dict(b) for b in built.bad_features]
         with self._write() as cur:
             self._delete_rows(cur, dataset)
-            counter = int(cur.execute("SELECT value FROM store_meta WHERE key='version_counter'").fetchone()[0]) + 1
+            counter = (
+                int(cur.execute("SELECT value FROM store_meta WHERE key='version_counter'").fetchone()[0]) + 1
+            )
             cur.execute("UPDATE store_meta SET value=? WHERE key='version_counter'", (str(counter),))
             cur.execute(
                 "INSERT INTO datasets VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
@@ -473,7 +484,9 @@ class CCSStore:
                         "sig_original) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                         row,
                     )
-                    cur.execute("INSERT INTO contour_rtree VALUES (?,?,?,?,?,?)", (cur.lastrowid, *box, dataset))
+                    cur.execute(
+                        "INSERT INTO contour_rtree VALUES (?,?,?,?,?,?)", (cur.lastrowid, *box, dataset)
+                    )
                 if progress:
                     progress(min(i + step, len(rows)), len(rows))
             cur.execute("DELETE FROM builds WHERE dataset=?", (dataset,))
@@ -481,7 +494,9 @@ class CCSStore:
 
     @staticmethod
     def _delete_rows(cur: sqlite3.Cursor, dataset: str) -> None:
-        cur.execute("DELETE FROM contour_rtree WHERE fid IN (SELECT fid FROM contours WHERE dataset=?)", (dataset,))
+        cur.execute(
+            "DELETE FROM contour_rtree WHERE fid IN (SELECT fid FROM contours WHERE dataset=?)", (dataset,)
+        )
         cur.execute("DELETE FROM contours WHERE dataset=?", (dataset,))
         cur.execute("DELETE FROM datasets WHERE id=?", (dataset,))
 
@@ -508,7 +523,10 @@ class CCSStore:
 
     def all_fids(self, dataset: str) -> list[int]:
         """Every contour fid of a dataset, in input order."""
-        return [r[0] for r in self._con().execute("SELECT fid FROM contours WHERE dataset=? ORDER BY fid", (dataset,))]
+        return [
+            r[0]
+            for r in self._con().execute("SELECT fid FROM contours WHERE dataset=? ORDER BY fid", (dataset,))
+        ]
 
     def load(self, fids: Sequence[int]) -> list[ContourRecord]:
         """Decode contour rows by fid (in the order given; unknown fids are skipped)."""
@@ -545,7 +563,9 @@ class CCSStore:
         return [out[f] for f in fids if f in out]
 
     # -- build status ------------------------------------------------------------------------------------
-    def set_build_status(self, dataset: str, state: str, done: int = 0, total: int = 0, error: str | None = None) -> None:
+    def set_build_status(
+        self, dataset: str, state: str, done: int = 0, total: int = 0, error: str | None = None
+    ) -> None:
         """Record a build's progress (visible to every process reading the store)."""
         now = time.time()
         with self._write() as cur:
@@ -568,8 +588,15 @@ class CCSStore:
             status = BuildStatus(*r)
             if status.state == "building" and status.host == _host() and not _pid_alive(status.pid):
                 status = BuildStatus(
-                    status.dataset, "failed", status.done, status.total, "the build was interrupted",
-                    status.pid, status.host, status.started, status.updated,
+                    status.dataset,
+                    "failed",
+                    status.done,
+                    status.total,
+                    "the build was interrupted",
+                    status.pid,
+                    status.host,
+                    status.started,
+                    status.updated,
                 )
             out[status.dataset] = status
         return out

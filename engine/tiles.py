@@ -102,14 +102,18 @@ def tile_center_latitude(tile: Tile) -> float:
     return math.degrees(math.atan(math.sinh(math.pi * (1 - 2 * (tile.y + 0.5) / n))))
 
 
-def mercator_to_lonlat(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def mercator_to_lonlat(
+    x: NDArray[np.float64], y: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """EPSG:3857 metres to longitude/latitude degrees (spherical formulas, exact for Web Mercator)."""
     lon = np.degrees(np.asarray(x, dtype=float) / 6378137.0)
     lat = np.degrees(np.arctan(np.sinh(np.asarray(y, dtype=float) / 6378137.0)))
     return lon, lat
 
 
-def lonlat_to_mercator(lon: NDArray[np.float64], lat: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def lonlat_to_mercator(
+    lon: NDArray[np.float64], lat: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Longitude/latitude degrees to EPSG:3857 metres (latitude clamped to Web Mercator's range)."""
     lat_c = np.clip(np.asarray(lat, dtype=float), -MAX_LATITUDE_DEG, MAX_LATITUDE_DEG)
     x = np.radians(np.asarray(lon, dtype=float)) * 6378137.0
@@ -205,9 +209,16 @@ def chunk_bounds(rows: Sequence[NDArray[np.float64]], size: int = CHUNK_ROWS) ->
     return np.column_stack([lo, hi])
 
 
-def row_runs(chunks: NDArray[np.float64], box: Bounds, m: int, size: int = CHUNK_ROWS) -> list[tuple[int, int]]:
+def row_runs(
+    chunks: NDArray[np.float64], box: Bounds, m: int, size: int = CHUNK_ROWS
+) -> list[tuple[int, int]]:
     """Row ranges [a, b) of the chunks that meet ``box``, consecutive chunks merged."""
-    hit = (chunks[:, 2] >= box.minx) & (chunks[:, 0] <= box.maxx) & (chunks[:, 3] >= box.miny) & (chunks[:, 1] <= box.maxy)
+    hit = (
+        (chunks[:, 2] >= box.minx)
+        & (chunks[:, 0] <= box.maxx)
+        & (chunks[:, 3] >= box.miny)
+        & (chunks[:, 1] <= box.maxy)
+    )
     if hit.all():
         return [(0, m)]
     idx = np.flatnonzero(hit)
@@ -267,7 +278,12 @@ def row_runs_many(
     allc = np.concatenate(chunks)
     owner = np.repeat(np.arange(len(chunks)), counts)
     offset = np.cumsum(counts) - counts
-    hit = (allc[:, 2] >= box.minx) & (allc[:, 0] <= box.maxx) & (allc[:, 3] >= box.miny) & (allc[:, 1] <= box.maxy)
+    hit = (
+        (allc[:, 2] >= box.minx)
+        & (allc[:, 0] <= box.maxx)
+        & (allc[:, 3] >= box.miny)
+        & (allc[:, 1] <= box.maxy)
+    )
     idx = np.flatnonzero(hit)
     if len(idx) == 0:
         empty = np.zeros(0, dtype=np.int64)

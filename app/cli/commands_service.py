@@ -12,14 +12,26 @@ from app.cli import app
 
 SourcesArg = Annotated[
     list[Path] | None,
-    typer.Argument(help="Contour files (GeoJSON, GeoPackage, Shapefile) or DEMs (GeoTIFF, .asc, .npz); "
-                        "none = the bundled sample."),
+    typer.Argument(
+        help="Contour files (GeoJSON, GeoPackage, Shapefile) or DEMs (GeoTIFF, .asc, .npz); "
+        "none = the bundled sample."
+    ),
 ]
-StoreOpt = Annotated[Path | None, typer.Option("--store", help="SQLite store file [env CCSM_STORE_PATH; var/ccsm.sqlite].")]
-ElevOpt = Annotated[str | None, typer.Option("--elevation-field", help="Elevation attribute of contour files.")]
-IntervalOpt = Annotated[float | None, typer.Option("--interval", min=0.0, help="Contour interval (required for a DEM).")]
-SourceScaleOpt = Annotated[float | None, typer.Option("--source-scale", help="Scale denominator of the source (t = 0) [50000].")]
-TargetScaleOpt = Annotated[float | None, typer.Option("--target-scale", help="Scale denominator of t = 1 [500000].")]
+StoreOpt = Annotated[
+    Path | None, typer.Option("--store", help="SQLite store file [env CCSM_STORE_PATH; var/ccsm.sqlite].")
+]
+ElevOpt = Annotated[
+    str | None, typer.Option("--elevation-field", help="Elevation attribute of contour files.")
+]
+IntervalOpt = Annotated[
+    float | None, typer.Option("--interval", min=0.0, help="Contour interval (required for a DEM).")
+]
+SourceScaleOpt = Annotated[
+    float | None, typer.Option("--source-scale", help="Scale denominator of the source (t = 0) [50000].")
+]
+TargetScaleOpt = Annotated[
+    float | None, typer.Option("--target-scale", help="Scale denominator of t = 1 [500000].")
+]
 
 
 def _set_env(name: str, value: object) -> None:
@@ -69,21 +81,29 @@ def serve(
         typer.echo(f"error: invalid settings: {exc}", err=True)
         raise typer.Exit(2) from None
     # The app is created from the environment in each worker (app.main:app), so 1 or N workers behave alike.
-    uvicorn.run("app.main:app", host=host, port=port, workers=workers, log_level=log_level, proxy_headers=True)
+    uvicorn.run(
+        "app.main:app", host=host, port=port, workers=workers, log_level=log_level, proxy_headers=True
+    )
 
 
 @app.command()
 def build(
-    source: Annotated[Path | None, typer.Argument(help="Contour file or DEM; none = the bundled sample.")] = None,
+    source: Annotated[
+        Path | None, typer.Argument(help="Contour file or DEM; none = the bundled sample.")
+    ] = None,
     store: StoreOpt = None,
-    dataset: Annotated[str | None, typer.Option("--id", help="Dataset id [from the file name; 'sample'].")] = None,
+    dataset: Annotated[
+        str | None, typer.Option("--id", help="Dataset id [from the file name; 'sample'].")
+    ] = None,
     name: Annotated[str | None, typer.Option(help="Human name of the dataset.")] = None,
     elevation_field: ElevOpt = None,
     interval: IntervalOpt = None,
     source_scale: SourceScaleOpt = None,
     target_scale: TargetScaleOpt = None,
     workers: Annotated[int | None, typer.Option(help="Build processes [one per core].", min=1)] = None,
-    force: Annotated[bool, typer.Option("--force", help="Rebuild even if the store holds the same source.")] = False,
+    force: Annotated[
+        bool, typer.Option("--force", help="Rebuild even if the store holds the same source.")
+    ] = False,
 ) -> None:
     """Precompute a source into the store without serving (one transaction: a killed build changes nothing)."""
     from rich.console import Console
@@ -117,17 +137,25 @@ def build(
     console.print(f"building {spec.dataset} from {spec.path.name} into {store_path}")
     try:
         ccs_store = CCSStore(store_path)
-        with build_lock(store_path), Progress(
-            TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-            console=console, transient=False,
-        ) as progress:
+        with (
+            build_lock(store_path),
+            Progress(
+                TextColumn("[bold]{task.description}"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TimeElapsedColumn(),
+                console=console,
+                transient=False,
+            ) as progress,
+        ):
             task = progress.add_task(f"building {spec.dataset}", total=None)
 
             def report(done: int, total: int) -> None:
                 progress.update(task, completed=done, total=total)
 
-            info, rebuilt = build_dataset(ccs_store, spec, workers=workers or settings.build_workers,
-                                          progress=report, force=force)
+            info, rebuilt = build_dataset(
+                ccs_store, spec, workers=workers or settings.build_workers, progress=report, force=force
+            )
     except CCSMError as exc:
         console.print(f"[red]error:[/red] {exc}")
         raise typer.Exit(2) from None

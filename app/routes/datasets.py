@@ -26,7 +26,9 @@ def list_datasets(service: Annotated[DatasetService, Depends(get_service)]) -> J
 
 
 @router.get("/datasets/{dataset}")
-def get_dataset(dataset: DatasetPath, service: Annotated[DatasetService, Depends(get_service)]) -> JSONResponse:
+def get_dataset(
+    dataset: DatasetPath, service: Annotated[DatasetService, Depends(get_service)]
+) -> JSONResponse:
     """One dataset: state, extent, counts, scales, build progress and the features left out."""
     return JSONResponse(service.detail(dataset), headers=NO_STORE)
 
@@ -53,30 +55,45 @@ async def read_limited(request: Request, limit: int) -> bytes:
         "requestBody": {
             "required": True,
             "description": "A GeoJSON FeatureCollection of contour lines (EPSG:4326) with an elevation property.",
-            "content": {"application/geo+json": {"schema": {"type": "object"}},
-                        "application/json": {"schema": {"type": "object"}}},
+            "content": {
+                "application/geo+json": {"schema": {"type": "object"}},
+                "application/json": {"schema": {"type": "object"}},
+            },
         }
     },
-    responses={202: {"description": "Accepted; the dataset builds in the background (poll GET /datasets/{id})."},
-               400: {"description": "Malformed GeoJSON or no usable contour."},
-               409: {"description": "The dataset id exists."},
-               413: {"description": "Larger than CCSM_MAX_UPLOAD_MB."}},
+    responses={
+        202: {"description": "Accepted; the dataset builds in the background (poll GET /datasets/{id})."},
+        400: {"description": "Malformed GeoJSON or no usable contour."},
+        409: {"description": "The dataset id exists."},
+        413: {"description": "Larger than CCSM_MAX_UPLOAD_MB."},
+    },
 )
 async def upload_dataset(
     request: Request,
     service: Annotated[DatasetService, Depends(get_service)],
     settings: Annotated[Settings, Depends(get_settings)],
-    id: Annotated[str | None, Query(description="Dataset id to create (a-z, 0-9, _ and -); default from name.",
-                                    max_length=64, pattern=r"^[a-z0-9_-]+$")] = None,
+    id: Annotated[
+        str | None,
+        Query(
+            description="Dataset id to create (a-z, 0-9, _ and -); default from name.",
+            max_length=64,
+            pattern=r"^[a-z0-9_-]+$",
+        ),
+    ] = None,
     name: Annotated[str | None, Query(description="Human name of the dataset.", max_length=200)] = None,
-    elevation_field: Annotated[str | None, Query(description="Elevation property (found by name if unset).",
-                                                 max_length=100)] = None,
-    interval: Annotated[float | None, Query(description="Contour interval (inferred if unset).", gt=0,
-                                            allow_inf_nan=False)] = None,
-    source_scale: Annotated[float | None, Query(description="Scale denominator of the contours (t = 0).", gt=0,
-                                                le=1e9, allow_inf_nan=False)] = None,
-    target_scale: Annotated[float | None, Query(description="Scale denominator of t = 1.", gt=0, le=1e10,
-                                                allow_inf_nan=False)] = None,
+    elevation_field: Annotated[
+        str | None, Query(description="Elevation property (found by name if unset).", max_length=100)
+    ] = None,
+    interval: Annotated[
+        float | None, Query(description="Contour interval (inferred if unset).", gt=0, allow_inf_nan=False)
+    ] = None,
+    source_scale: Annotated[
+        float | None,
+        Query(description="Scale denominator of the contours (t = 0).", gt=0, le=1e9, allow_inf_nan=False),
+    ] = None,
+    target_scale: Annotated[
+        float | None, Query(description="Scale denominator of t = 1.", gt=0, le=1e10, allow_inf_nan=False)
+    ] = None,
 ) -> JSONResponse:
     """Upload GeoJSON contours; answered 202 while the dataset builds in the background."""
     body = await read_limited(request, settings.max_upload_bytes)
@@ -103,7 +120,9 @@ async def upload_dataset(
 
 
 @router.delete("/datasets/{dataset}", status_code=204, responses={404: {"description": "Unknown dataset."}})
-def delete_dataset(dataset: DatasetPath, service: Annotated[DatasetService, Depends(get_service)]) -> Response:
+def delete_dataset(
+    dataset: DatasetPath, service: Annotated[DatasetService, Depends(get_service)]
+) -> Response:
     """Delete a dataset from the store (a configured source is rebuilt at the next start)."""
     service.delete(dataset)
     return Response(status_code=204)

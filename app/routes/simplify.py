@@ -32,21 +32,33 @@ def parse_bbox(text: str | None) -> list[float] | None:
 @router.get(
     "/simplify",
     response_class=Response,
-    responses={200: {"content": {"application/geo+json": {}}, "description": "GeoJSON FeatureCollection (EPSG:4326)."}},
+    responses={
+        200: {
+            "content": {"application/geo+json": {}},
+            "description": "GeoJSON FeatureCollection (EPSG:4326).",
+        }
+    },
 )
 def simplify(
     request: Request,
     scale: Annotated[
         float,
-        Query(description="Map scale denominator (250000 for 1:250,000); any positive value.", gt=0,
-              le=MAX_SCALE, allow_inf_nan=False),
+        Query(
+            description="Map scale denominator (250000 for 1:250,000); any positive value.",
+            gt=0,
+            le=MAX_SCALE,
+            allow_inf_nan=False,
+        ),
     ],
     service: Annotated[DatasetService, Depends(get_service)],
     settings: Annotated[Settings, Depends(get_settings)],
-    dataset: Annotated[str | None, Query(description="Dataset id; default: the first configured dataset.",
-                                         max_length=64)] = None,
-    bbox: Annotated[str | None, Query(description="Only contours meeting west,south,east,north (degrees).",
-                                      max_length=200)] = None,
+    dataset: Annotated[
+        str | None, Query(description="Dataset id; default: the first configured dataset.", max_length=64)
+    ] = None,
+    bbox: Annotated[
+        str | None,
+        Query(description="Only contours meeting west,south,east,north (degrees).", max_length=200),
+    ] = None,
     method: Annotated[MethodName, Query(description="ccsm, dp, wm, vw or original.")] = "ccsm",
 ) -> Response:
     """Every visible contour at a scale, with elevation, t, similarity and scale per feature."""

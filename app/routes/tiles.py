@@ -48,8 +48,19 @@ async def get_tile(
     _, zoom, t = renderer.check_tile_request(z, x, y, q.zoom, q.method, q.t)
     version = service.require_ready(dataset)
     gz = accepts_gzip(request)
-    etag = make_etag(dataset, version, z, x, y, zoom, q.method, t if q.method == "ccsm" else None,
-                     settings.tile_extent, settings.tile_buffer, "gz" if gz else "id")
+    etag = make_etag(
+        dataset,
+        version,
+        z,
+        x,
+        y,
+        zoom,
+        q.method,
+        t if q.method == "ccsm" else None,
+        settings.tile_extent,
+        settings.tile_buffer,
+        "gz" if gz else "id",
+    )
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
@@ -80,7 +91,12 @@ def get_tilejson(
     url = f"{base}/tiles/{dataset}/{{z}}/{{x}}/{{y}}.mvt?{urlencode(query)}"
     bounds = lonlat_bounds(info)
     lat = (bounds[1] + bounds[3]) / 2
-    start_zoom = int(min(settings.max_zoom, max(settings.min_zoom, round(float(zoom_for_scale(info.source_scale, lat)) - 1))))
+    start_zoom = int(
+        min(
+            settings.max_zoom,
+            max(settings.min_zoom, round(float(zoom_for_scale(info.source_scale, lat)) - 1)),
+        )
+    )
     body = {
         "tilejson": "3.0.0",
         "name": info.name,
@@ -101,7 +117,9 @@ def get_tilejson(
                 "maxzoom": settings.max_zoom,
                 "fields": {
                     "elevation": "Number: height of the contour",
-                    "index": f"Boolean: true on every 5th interval ({5 * interval:g})" if interval else "Boolean",
+                    "index": f"Boolean: true on every 5th interval ({5 * interval:g})"
+                    if interval
+                    else "Boolean",
                     "t": "Number: generalization parameter in [0, 1] (0 = source detail)",
                 },
             }

@@ -41,14 +41,27 @@ def synthetic_features(seed: int = 7) -> list[dict]:
             lat = LAT0 + hy + rr * np.sin(a)
             coords = np.column_stack([lon, lat])
             coords = np.vstack([coords, coords[:1]])
-            feats.append({"type": "Feature", "properties": {"id": f"h{k}", "elevation": 400 + INTERVAL * i},
-                          "geometry": {"type": "LineString", "coordinates": np.round(coords, 7).tolist()}})
+            feats.append(
+                {
+                    "type": "Feature",
+                    "properties": {"id": f"h{k}", "elevation": 400 + INTERVAL * i},
+                    "geometry": {"type": "LineString", "coordinates": np.round(coords, 7).tolist()},
+                }
+            )
             k += 1
     for j in range(2):
         x = np.linspace(LON0 - 0.06, LON0 + 0.06, 120)
         y = LAT0 - 0.04 - 0.004 * j + 0.003 * np.sin(x * 300) + 0.0005 * rng.standard_normal(len(x))
-        feats.append({"type": "Feature", "properties": {"id": f"line{j}", "elevation": 380 - INTERVAL * j},
-                      "geometry": {"type": "LineString", "coordinates": np.round(np.column_stack([x, y]), 7).tolist()}})
+        feats.append(
+            {
+                "type": "Feature",
+                "properties": {"id": f"line{j}", "elevation": 380 - INTERVAL * j},
+                "geometry": {
+                    "type": "LineString",
+                    "coordinates": np.round(np.column_stack([x, y]), 7).tolist(),
+                },
+            }
+        )
     return feats
 
 
@@ -102,9 +115,21 @@ class LiveServer:
         self.log_path = log
         self._log = open(log, "wb") if log else subprocess.DEVNULL
         self.proc = subprocess.Popen(
-            [sys.executable, "-c", "from app.cli import main; main()", "serve", "--port", str(self.port),
-             "--log-level", "warning", *(args or [])],
-            env=full_env, cwd=REPO, stdout=self._log, stderr=subprocess.STDOUT,
+            [
+                sys.executable,
+                "-c",
+                "from app.cli import main; main()",
+                "serve",
+                "--port",
+                str(self.port),
+                "--log-level",
+                "warning",
+                *(args or []),
+            ],
+            env=full_env,
+            cwd=REPO,
+            stdout=self._log,
+            stderr=subprocess.STDOUT,
         )
 
     def wait_healthy(self, timeout: float = 60.0) -> None:
@@ -144,14 +169,23 @@ class LiveServer:
 
 
 @pytest.fixture(scope="module")
-def live(tmp_path_factory: pytest.TempPathFactory, built_store: Path, synthetic_path: Path) -> Iterator[LiveServer]:
+def live(
+    tmp_path_factory: pytest.TempPathFactory, built_store: Path, synthetic_path: Path
+) -> Iterator[LiveServer]:
     """A real server on loopback serving a copy of the synthetic store."""
     d = tmp_path_factory.mktemp("live")
     store = d / "ccsm.sqlite"
     CCSStore(built_store)._con().execute("PRAGMA wal_checkpoint(TRUNCATE)")
     store.write_bytes(built_store.read_bytes())
-    server = LiveServer({"CCSM_STORE_PATH": str(store), "CCSM_SOURCES": str(synthetic_path),
-                         "CCSM_BUILD_WORKERS": "1", "CCSM_MAX_UPLOAD_MB": "0.5"}, log=d / "server.log")
+    server = LiveServer(
+        {
+            "CCSM_STORE_PATH": str(store),
+            "CCSM_SOURCES": str(synthetic_path),
+            "CCSM_BUILD_WORKERS": "1",
+            "CCSM_MAX_UPLOAD_MB": "0.5",
+        },
+        log=d / "server.log",
+    )
     try:
         server.wait_healthy()
         server.wait_ready("hills")

@@ -38,9 +38,17 @@ def test_unknown_dataset_404(client):
 
 def test_upload_builds_in_background_then_delete(client):
     feats = synthetic_features(seed=3)[:6]
-    feats.append({"type": "Feature", "properties": {"elevation": 5}, "geometry": {"type": "Point", "coordinates": [0, 0]}})
+    feats.append(
+        {
+            "type": "Feature",
+            "properties": {"elevation": 5},
+            "geometry": {"type": "Point", "coordinates": [0, 0]},
+        }
+    )
     body = json.dumps({"type": "FeatureCollection", "features": feats})
-    r = client.post("/datasets?id=mine&name=My%20hills", content=body, headers={"content-type": "application/geo+json"})
+    r = client.post(
+        "/datasets?id=mine&name=My%20hills", content=body, headers={"content-type": "application/geo+json"}
+    )
     assert r.status_code == 202, r.text
     assert r.json()["id"] == "mine" and r.headers["location"] == "/datasets/mine"
     assert any(i["id"] == "mine" for i in client.get("/datasets").json())

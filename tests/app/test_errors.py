@@ -59,8 +59,21 @@ def test_bad_get(client, path, status, words):
         (b"[1, 2]", 400),
         (json.dumps({"type": "FeatureCollection"}).encode(), 400),
         (json.dumps({"type": "FeatureCollection", "features": []}).encode(), 400),
-        (json.dumps({"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {"elevation": 1},
-                     "geometry": {"type": "Point", "coordinates": [0, 0]}}]}).encode(), 400),
+        (
+            json.dumps(
+                {
+                    "type": "FeatureCollection",
+                    "features": [
+                        {
+                            "type": "Feature",
+                            "properties": {"elevation": 1},
+                            "geometry": {"type": "Point", "coordinates": [0, 0]},
+                        }
+                    ],
+                }
+            ).encode(),
+            400,
+        ),
         (b"\xff\xfe\x00", 400),
         (b"x" * (600 * 1024), 413),
     ],

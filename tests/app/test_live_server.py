@@ -29,7 +29,10 @@ def test_endpoints_over_loopback(live):
     r = httpx.get(template.format(z=z, x=x, y=y), headers={"accept-encoding": "gzip"})
     assert r.status_code == 200 and r.headers["content-encoding"] == "gzip"
     check_tile(r.content)
-    assert httpx.get(template.format(z=z, x=x, y=y), headers={"if-none-match": r.headers["etag"]}).status_code == 304
+    assert (
+        httpx.get(template.format(z=z, x=x, y=y), headers={"if-none-match": r.headers["etag"]}).status_code
+        == 304
+    )
     assert httpx.get(base + "/tiles/hills/12/0/0.mvt").status_code == 204
     doc = httpx.get(base + "/simplify?scale=250000").json()
     assert doc["features"]
@@ -40,7 +43,9 @@ def test_endpoints_over_loopback(live):
 
 def test_upload_and_delete_over_loopback(live):
     body = json.dumps({"type": "FeatureCollection", "features": synthetic_features(seed=11)[:3]})
-    r = httpx.post(live.url + "/datasets?id=live-up", content=body, headers={"content-type": "application/geo+json"})
+    r = httpx.post(
+        live.url + "/datasets?id=live-up", content=body, headers={"content-type": "application/geo+json"}
+    )
     assert r.status_code == 202
     live.wait_ready("live-up", timeout=120)
     assert httpx.delete(live.url + "/datasets/live-up").status_code == 204
@@ -50,15 +55,24 @@ def test_upload_and_delete_over_loopback(live):
 
 
 def test_bad_requests_do_not_hurt_the_server(live):
-    for path in ["/tiles/hills/40/0/0.mvt", "/tiles/hills/2/9/9.mvt", "/simplify?scale=nan", "/simplify?scale=-1",
-                 "/tiles/hills/5/1/1.mvt?zoom=7", "/tiles/x/1/1/1.mvt", "/simplify?scale=5&bbox=3,3,1,1"]:
+    for path in [
+        "/tiles/hills/40/0/0.mvt",
+        "/tiles/hills/2/9/9.mvt",
+        "/simplify?scale=nan",
+        "/simplify?scale=-1",
+        "/tiles/hills/5/1/1.mvt?zoom=7",
+        "/tiles/x/1/1/1.mvt",
+        "/simplify?scale=5&bbox=3,3,1,1",
+    ]:
         r = httpx.get(live.url + path)
         assert 400 <= r.status_code < 500 and r.json()["detail"]
     assert httpx.get(live.url + "/datasets/hills").json()["state"] == "ready"
 
 
 def node_available() -> bool:
-    return shutil.which("node") is not None and (NODE_DIR / "node_modules" / "@mapbox" / "vector-tile").is_dir()
+    return (
+        shutil.which("node") is not None and (NODE_DIR / "node_modules" / "@mapbox" / "vector-tile").is_dir()
+    )
 
 
 def test_maplibre_parser_decodes_tiles(live, tmp_path):
@@ -75,7 +89,9 @@ def test_maplibre_parser_decodes_tiles(live, tmp_path):
         path = tmp_path / f"{z}-{x}-{y}.mvt"
         path.write_bytes(r.content)
         args.append(f"{z}/{x}/{y}={path}")
-    out = subprocess.run(["node", str(NODE_DIR / "decode.mjs"), *args], capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        ["node", str(NODE_DIR / "decode.mjs"), *args], capture_output=True, text=True, check=True
+    )
     tiles = json.loads(out.stdout)
     assert len(tiles) == 4
     for t in tiles:

@@ -32,7 +32,9 @@ def test_any_positive_scale(client, scale):
 
 def test_bbox_filter(client):
     every = client.get("/simplify?scale=100000").json()["features"]
-    some = client.get(f"/simplify?scale=100000&bbox={LON0 + 0.03},{LAT0 + 0.01},{LON0 + 0.05},{LAT0 + 0.03}").json()
+    some = client.get(
+        f"/simplify?scale=100000&bbox={LON0 + 0.03},{LAT0 + 0.01},{LON0 + 0.05},{LAT0 + 0.03}"
+    ).json()
     assert 0 < len(some["features"]) < len(every)
 
 

@@ -8,7 +8,6 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import httpx
 import pytest
@@ -61,9 +60,23 @@ def test_killed_build_leaves_the_store_as_it_was(tmp_path, built_store):
     fids_before = CCSStore(store).all_fids("hills")
     # Rebuild dataset 'hills' from another, larger source, and kill -9 the build half way.
     proc = subprocess.Popen(
-        [sys.executable, "-c", "from app.cli import main; main()", "build", str(sample_contours_path()),
-         "--store", str(store), "--id", "hills", "--workers", "1"],
-        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env={**os.environ, "COLUMNS": "100"},
+        [
+            sys.executable,
+            "-c",
+            "from app.cli import main; main()",
+            "build",
+            str(sample_contours_path()),
+            "--store",
+            str(store),
+            "--id",
+            "hills",
+            "--workers",
+            "1",
+        ],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        env={**os.environ, "COLUMNS": "100"},
     )
     assert proc.stdout is not None
     line = proc.stdout.readline().decode()
@@ -84,14 +97,29 @@ def test_killed_build_leaves_the_store_as_it_was(tmp_path, built_store):
 
 def test_build_command_is_idempotent(tmp_path, synthetic_path):
     store = tmp_path / "s.sqlite"
-    cmd = [sys.executable, "-c", "from app.cli import main; main()", "build", str(synthetic_path), "--store", str(store),
-           "--id", "hills", "--workers", "1"]
+    cmd = [
+        sys.executable,
+        "-c",
+        "from app.cli import main; main()",
+        "build",
+        str(synthetic_path),
+        "--store",
+        str(store),
+        "--id",
+        "hills",
+        "--workers",
+        "1",
+    ]
     one = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True)
     assert one.returncode == 0, one.stderr
     assert "built hills" in one.stderr
     two = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True)
     assert "already current" in two.stderr
-    bad = subprocess.run(cmd[:4] + [str(tmp_path / "missing.geojson"), "--store", str(store)], cwd=REPO,
-                         capture_output=True, text=True)
+    bad = subprocess.run(
+        cmd[:4] + [str(tmp_path / "missing.geojson"), "--store", str(store)],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+    )
     assert bad.returncode == 2
     assert CCSStore(store).dataset("hills").data_version == 1

@@ -53,7 +53,9 @@ def test_etag_304(client):
 def test_cors_on_get(client):
     r = client.get(url(*tile_for(LON0, LAT0, 12)), headers={"origin": "https://example.org"})
     assert r.headers["access-control-allow-origin"] == "*"
-    pre = client.options(url(1, 0, 0), headers={"origin": "https://x.org", "access-control-request-method": "GET"})
+    pre = client.options(
+        url(1, 0, 0), headers={"origin": "https://x.org", "access-control-request-method": "GET"}
+    )
     assert pre.status_code == 200
 
 
@@ -121,8 +123,14 @@ def test_small_contours_vanish(client):
 
 
 def test_feature_ids_stable_across_zooms(client):
-    a = {f["id"]: f["properties"]["elevation"] for f in check_tile(client.get(url(*tile_for(LON0, LAT0, 12))).content)}
-    b = {f["id"]: f["properties"]["elevation"] for f in check_tile(client.get(url(*tile_for(LON0, LAT0, 13))).content)}
+    a = {
+        f["id"]: f["properties"]["elevation"]
+        for f in check_tile(client.get(url(*tile_for(LON0, LAT0, 12))).content)
+    }
+    b = {
+        f["id"]: f["properties"]["elevation"]
+        for f in check_tile(client.get(url(*tile_for(LON0, LAT0, 13))).content)
+    }
     for fid in set(a) & set(b):
         assert a[fid] == b[fid]
 

@@ -30,7 +30,9 @@ def test_same_tile_as_mapbox_vector_tile(features):
         ps = [drop_repeats(np.array(p, dtype=np.int64)) for p in parts]
         ps = [p for p in ps if len(p) >= 2]
         if ps:
-            feats.append(LineFeature(i, ps, {"elevation": float(100 + i), "index": i % 2 == 0, "t": 0.5, "n": -i}))
+            feats.append(
+                LineFeature(i, ps, {"elevation": float(100 + i), "index": i % 2 == 0, "t": 0.5, "n": -i})
+            )
     if not feats:
         return
     ours = decode(encode_tile({"contours": feats}))
