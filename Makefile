@@ -13,6 +13,7 @@ NPM_DIRS := $(wildcard web tests/app/node bench/geojsonvt)
 	@for d in $(NPM_DIRS); do \
 	  if [ -f $$d/package.json ]; then echo "npm ci in $$d"; (cd $$d && npm ci --no-audit --no-fund --loglevel=error) || exit 1; fi; \
 	done
+	$(PYTHON) -m engine.warmup
 	touch .install-stamp
 
 install: .install-stamp

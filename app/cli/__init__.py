@@ -18,8 +18,10 @@ app = typer.Typer(
 
 def _register_commands() -> None:
     # Each module adds its commands to ``app``; imported here so ``ccsm --help`` lists them all.
-    from app.cli import commands_engine  # noqa: F401  simplify, evaluate
-    from app.cli import commands_service  # noqa: F401  serve, build
+    from app.cli import (
+        commands_engine,  # noqa: F401  simplify, evaluate
+        commands_service,  # noqa: F401  serve, build
+    )
 
 
 def main() -> None:

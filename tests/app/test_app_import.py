@@ -2,15 +2,6 @@ import subprocess
 import sys
 
 
-def test_engine_imports_no_web_framework():
-    code = (
-        "import sys, engine, engine.store, engine.render, engine.mvt, engine.tiles\n"
-        "bad = [m for m in ('fastapi', 'starlette', 'uvicorn', 'pydantic_settings') if m in sys.modules]\n"
-        "assert not bad, bad\n"
-    )
-    subprocess.run([sys.executable, "-c", code], check=True)
-
-
 def test_importing_app_main_builds_nothing(tmp_path):
     code = (
         "import os, app.main\n"
