@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 import shapely
-from conftest import circle_coords, noisy_ellipse_coords, noisy_line_coords
 from numpy.testing import assert_array_equal
+from synthetic_shapes import circle_coords, noisy_ellipse_coords, noisy_line_coords
 
 from engine.build import BuiltSet, build_contour_set, vanish_scale
 from engine.ccs import build_ccs
