@@ -89,21 +89,33 @@ def varint_array(values: NDArray[np.uint64]) -> tuple[NDArray[np.uint8], NDArray
     return out, starts
 
 
-def geometry_streams(features: Sequence[LineFeature]) -> list[bytes]:
-    """The packed geometry command stream of each feature (MoveTo/LineTo with zigzag deltas), as bytes."""
-    parts = [p for f in features for p in f.parts]
-    if not parts:
-        return [b"" for _ in features]
-    lens = np.array([len(p) for p in parts], dtype=np.int64)
-    first_of_feature = np.zeros(len(parts), dtype=bool)
-    part_feature_start = np.cumsum([0] + [len(f.parts) for f in features])[:-1]
-    first_of_feature[part_feature_start[[len(f.parts) > 0 for f in features]]] = True
-    pts = np.concatenate(parts).astype(np.int64, copy=False)
+def geometry_bytes(
+    pts: NDArray[np.int64], part_lens: NDArray[np.int64], first_of_feature: NDArray[np.bool_]
+) -> tuple[bytes, NDArray[np.int64]]:
+    """Geometry command streams of many line parts at once.
+
+    Parameters
+    ----------
+    pts
+        (N, 2) integer tile-grid coordinates of all parts, concatenated.
+    part_lens
+        Points of each part (each >= 2).
+    first_of_feature
+        True for the first part of each feature (the cursor restarts at (0, 0) there; it carries over
+        between the parts of one feature).
+
+    Returns
+    -------
+    (data, starts)
+        The concatenated encodings and the byte offset where each part's stream starts, plus the total
+        length as a last entry.
+    """
+    lens = np.asarray(part_lens, dtype=np.int64)
+    pts = np.asarray(pts).astype(np.int64, copy=False)
     starts = np.cumsum(lens) - lens
     delta = np.empty_like(pts)
     delta[0] = pts[0]
     delta[1:] = pts[1:] - pts[:-1]
-    # The cursor carries over between the parts of one feature and restarts at (0, 0) for the next feature.
     fs = starts[first_of_feature]
     delta[fs] = pts[fs]
     zz = ((delta << 1) ^ (delta >> 63)).astype(np.uint64)
@@ -113,17 +125,26 @@ def geometry_streams(features: Sequence[LineFeature]) -> list[bytes]:
     stream = np.empty(int(slots.sum()), dtype=np.uint64)
     stream[offsets] = 9  # MoveTo (1) with count 1
     stream[offsets + 3] = ((lens - 1) << 3) | 2  # LineTo (2) with count n - 1
-    part_of_point = np.repeat(np.arange(len(parts)), lens)
-    local = np.arange(len(pts)) - starts[part_of_point]
-    pos = offsets[part_of_point] + 1 + 2 * local + (local >= 1)
+    # Slot of each point: its part's offset + 1, two per point, plus one for the LineTo after the first.
+    pos = np.repeat(offsets + 2 - 2 * starts, lens) + 2 * np.arange(len(pts), dtype=np.int64)
+    pos[starts] -= 1
     stream[pos] = zz[:, 0]
     stream[pos + 1] = zz[:, 1]
-
     data, byte_starts = varint_array(stream)
-    # Byte range of each feature: from its first part's first slot to the next feature's.
+    return data.tobytes(), np.append(byte_starts[offsets], len(data))
+
+
+def geometry_streams(features: Sequence[LineFeature]) -> list[bytes]:
+    """The packed geometry command stream of each feature (MoveTo/LineTo with zigzag deltas), as bytes."""
+    parts = [p for f in features for p in f.parts]
+    if not parts:
+        return [b"" for _ in features]
+    lens = np.array([len(p) for p in parts], dtype=np.int64)
     part_counts = [len(f.parts) for f in features]
-    bounds = np.concatenate([byte_starts[offsets], [len(data)]])
-    raw = data.tobytes()
+    first_of_feature = np.zeros(len(parts), dtype=bool)
+    part_feature_start = np.cumsum([0] + part_counts)[:-1]
+    first_of_feature[part_feature_start[[c > 0 for c in part_counts]]] = True
+    raw, bounds = geometry_bytes(np.concatenate(parts), lens, first_of_feature)
     out = []
     k = 0
     for count in part_counts:
@@ -149,27 +170,80 @@ def _field(key: bytes, payload: bytes) -> bytes:
     return key + varint(len(payload)) + payload
 
 
-def encode_layer(name: str, features: Sequence[LineFeature], extent: int = DEFAULT_EXTENT) -> bytes:
-    """One ``Layer`` message (without the Tile envelope) of line features."""
+def _layer_bytes(
+    name: str,
+    ids: Sequence[int],
+    properties: Sequence[Mapping[str, PropertyValue]],
+    geometries: Sequence[bytes],
+    extent: int,
+) -> bytes:
     keys: dict[str, int] = {}
     values: dict[tuple[type, PropertyValue], int] = {}
+    tag_cache: dict[tuple[tuple[str, type, PropertyValue], ...], bytes] = {}
     chunks = [b"\x78\x02", _field(b"\x0a", name.encode("utf-8"))]
-    for feature, geometry in zip(features, geometry_streams(features), strict=True):
+    append = chunks.append
+    for fid, props, geometry in zip(ids, properties, geometries, strict=True):
         if not geometry:
             continue
-        tags = bytearray()
-        for key, value in feature.properties.items():
-            ki = keys.setdefault(key, len(keys))
-            vi = values.setdefault((type(value), value), len(values))
-            tags += varint(ki)
-            tags += varint(vi)
-        body = b"\x08" + varint(int(feature.id)) + _field(b"\x12", bytes(tags)) + b"\x18\x02"
-        body += _field(b"\x22", geometry)
-        chunks.append(_field(b"\x12", body))
+        sig = tuple((k, type(v), v) for k, v in props.items())
+        tags = tag_cache.get(sig)
+        if tags is None:
+            buf = bytearray()
+            for key, typ, value in sig:
+                ki = keys.setdefault(key, len(keys))
+                vi = values.setdefault((typ, value), len(values))
+                buf += varint(ki)
+                buf += varint(vi)
+            tags = tag_cache[sig] = b"\x12" + varint(len(buf)) + bytes(buf) + b"\x18\x02\x22"
+        body = b"\x08" + varint(int(fid)) + tags + varint(len(geometry)) + geometry
+        append(b"\x12" + varint(len(body)) + body)
     chunks.extend(_field(b"\x1a", key.encode("utf-8")) for key in keys)
     chunks.extend(_field(b"\x22", _value_bytes(value)) for (_, value) in values)
     chunks.append(b"\x28" + varint(extent))
     return b"".join(chunks)
+
+
+def encode_layer(name: str, features: Sequence[LineFeature], extent: int = DEFAULT_EXTENT) -> bytes:
+    """One ``Layer`` message (without the Tile envelope) of line features."""
+    return _layer_bytes(
+        name,
+        [f.id for f in features],
+        [f.properties for f in features],
+        geometry_streams(features),
+        extent,
+    )
+
+
+def encode_line_tile(
+    name: str,
+    ids: Sequence[int],
+    properties: Sequence[Mapping[str, PropertyValue]],
+    pts: NDArray[np.int64],
+    part_lens: NDArray[np.int64],
+    part_counts: NDArray[np.int64],
+    extent: int = DEFAULT_EXTENT,
+) -> bytes:
+    """A one-layer tile from arrays: the same bytes as :func:`encode_tile` of the equivalent LineFeatures.
+
+    Parameters
+    ----------
+    ids, properties
+        Per feature.
+    pts, part_lens
+        All parts of all features, concatenated feature by feature (each part >= 2 points, no two
+        consecutive points equal).
+    part_counts
+        Parts of each feature (each >= 1).
+    """
+    if len(part_lens) == 0:
+        return b""
+    counts = np.asarray(part_counts, dtype=np.int64)
+    first = np.zeros(len(part_lens), dtype=bool)
+    first[np.cumsum(counts) - counts] = True
+    raw, bounds = geometry_bytes(pts, part_lens, first)
+    cuts = bounds[np.concatenate([[0], np.cumsum(counts)])].tolist()
+    geometries = [raw[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+    return _field(b"\x1a", _layer_bytes(name, ids, properties, geometries, extent))
 
 
 def encode_tile(layers: Mapping[str, Sequence[LineFeature]], extent: int = DEFAULT_EXTENT) -> bytes:

@@ -21,22 +21,26 @@ from numpy.typing import NDArray
 from engine.crs import WEB_MERCATOR, make_transformer
 from engine.errors import InvalidParameter
 from engine.geometry import closed_path
-from engine.mvt import LineFeature, encode_tile
+from engine.mvt import LineFeature, encode_line_tile, encode_tile
+from engine.rowsig import row_significance
 from engine.scale import scale_for_zoom
 from engine.similarity import similarity
 from engine.store import CCSStore, ContourRecord, DatasetInfo
 from engine.tiles import (
+    CHUNK_ROWS,
     Bounds,
     Tile,
     buffered,
     check_fractional_zoom,
     check_tile,
     chunk_bounds,
+    clip_lines,
     clip_many,
     collinear_free,
     lonlat_to_mercator,
     mercator_to_lonlat,
     quantize,
+    ranges,
     row_runs_many,
     tile_bounds,
     tile_center_latitude,
@@ -179,9 +183,7 @@ def check_bbox(bbox: Sequence[float]) -> Bounds:
     if not all(math.isfinite(v) for v in (w, s, e, n)):
         raise InvalidParameter("bbox values must be finite numbers")
     if not (-180 <= w <= 180 and -180 <= e <= 180 and -90 <= s <= 90 and -90 <= n <= 90):
-        raise InvalidParameter(
-            f"bbox {w},{s},{e},{n} lies outside longitude [-180, 180] / latitude [-90, 90]"
-        )
+        raise InvalidParameter(f"bbox {w},{s},{e},{n} lies outside longitude [-180, 180] / latitude [-90, 90]")
     if w > e or s > n:
         raise InvalidParameter(f"bbox {w},{s},{e},{n} has min > max (expected west,south,east,north)")
     return Bounds(w, s, e, n)
@@ -204,9 +206,7 @@ def is_index(elevation: float, interval: float | None) -> bool:
     return abs(q - round(q)) < 1e-6
 
 
-def t_at_scales(
-    ladder: NDArray[np.float64], tables: NDArray[np.float64], scale: float
-) -> NDArray[np.float64]:
+def t_at_scales(ladder: NDArray[np.float64], tables: NDArray[np.float64], scale: float) -> NDArray[np.float64]:
     """Each row of ``tables`` ((n, S) t at the ladder's scales) interpolated at one scale, as ``t_for_scale``.
 
     The interpolation weights depend on the ladder and the scale only, so they are found once for all rows.
@@ -255,6 +255,121 @@ class PreparedContour:
         return self.rec.nbytes + self.chunks.nbytes + self.original_chunks.nbytes + self.top_reduced.nbytes
 
 
+@dataclass(frozen=True)
+class PackedLines:
+    """The rows of many lines concatenated, with per-line offsets, row significance and chunk boxes.
+
+    Attributes
+    ----------
+    off
+        (n + 1,) row offsets: line i is rows [off[i], off[i + 1]).
+    sig
+        (M,) or (M, k) float32 significance of each row (columns: alternatives chosen per line).
+    chunk_off, chunks
+        (n + 1,) offsets into (C, 4) chunk boxes (:func:`engine.tiles.chunk_bounds` of each line).
+    """
+
+    off: NDArray[np.int64]
+    sig: NDArray[np.float32]
+    chunk_off: NDArray[np.int64]
+    chunks: NDArray[np.float64]
+
+    @classmethod
+    def of(
+        cls, sizes: Sequence[int], sigs: Sequence[NDArray[np.float32]], chunks: Sequence[NDArray[np.float64]]
+    ) -> PackedLines:
+        """Concatenate per-line significance and chunk arrays."""
+        off = np.concatenate([[0], np.cumsum(np.asarray(sizes, dtype=np.int64))]).astype(np.int64)
+        counts = np.fromiter((len(c) for c in chunks), dtype=np.int64, count=len(chunks))
+        chunk_off = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        return cls(off, np.concatenate(sigs), chunk_off, np.concatenate(chunks))
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held."""
+        return int(self.off.nbytes + self.sig.nbytes + self.chunk_off.nbytes + self.chunks.nbytes)
+
+
+@dataclass(frozen=True)
+class DatasetPack:
+    """Every contour of one dataset version in a few big arrays, so that a tile is a handful of NumPy calls.
+
+    Contour ``i`` (in fid order) has CCS rows ``base[ccs.off[i]:ccs.off[i + 1]]`` (and ``top``), original
+    rows ``original[orig.off[i]:orig.off[i + 1]]``; ``ccs.sig`` has two columns: the significance of the
+    (base, top) rows together (valid at every t) and of ``top`` alone (for contours drawn at t = 1).
+    """
+
+    data_version: int
+    fid: NDArray[np.int64]
+    vanish: NDArray[np.float64]
+    elevation: NDArray[np.float64]
+    index: NDArray[np.bool_]
+    tables: NDArray[np.float64]
+    base: NDArray[np.float64]
+    top: NDArray[np.float64]
+    ccs: PackedLines
+    original: NDArray[np.float64]
+    orig: PackedLines
+
+    @classmethod
+    def of(cls, data_version: int, recs: Sequence[ContourRecord], interval: float | None) -> DatasetPack:
+        """Pack decoded contour rows (in fid order)."""
+        if not recs:
+            z2 = np.zeros((0, 2))
+            empty = PackedLines.of([], [np.zeros(0, np.float32)], [np.zeros((0, 4))])
+            return cls(
+                data_version,
+                np.zeros(0, np.int64),
+                np.zeros(0),
+                np.zeros(0),
+                np.zeros(0, bool),
+                np.zeros((0, 1)),
+                z2,
+                z2,
+                empty,
+                z2,
+                empty,
+            )
+        ccs_sig = [np.column_stack([r.sig, row_significance(r.top)]).astype(np.float32, copy=False) for r in recs]
+        elevation = np.array([float(r.elevation) for r in recs])
+        index_of = {e: is_index(e, interval) for e in set(elevation.tolist())}
+        return cls(
+            data_version,
+            np.array([r.fid for r in recs], dtype=np.int64),
+            np.array([r.vanish_scale for r in recs], dtype=np.float64),
+            elevation,
+            np.array([index_of[e] for e in elevation.tolist()], dtype=bool),
+            np.stack([r.t_at_scale for r in recs]),
+            np.ascontiguousarray(np.concatenate([r.base for r in recs])),
+            np.ascontiguousarray(np.concatenate([r.top for r in recs])),
+            PackedLines.of([len(r.base) for r in recs], ccs_sig, [chunk_bounds([r.base, r.top]) for r in recs]),
+            np.ascontiguousarray(np.concatenate([r.original for r in recs])),
+            PackedLines.of(
+                [len(r.original) for r in recs],
+                [r.sig_original for r in recs],
+                [chunk_bounds([r.original]) for r in recs],
+            ),
+        )
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held."""
+        arrays = (self.fid, self.vanish, self.elevation, self.index, self.tables, self.base, self.top, self.original)
+        return int(sum(a.nbytes for a in arrays) + self.ccs.nbytes + self.orig.nbytes)
+
+    def locate(self, fids: Sequence[int]) -> NDArray[np.intp] | None:
+        """Positions of fids (sorted) in the pack; None when one of them is not in it (another version)."""
+        f = np.asarray(fids, dtype=np.int64)
+        if len(self.fid) == 0:
+            return None if len(f) else np.zeros(0, dtype=np.intp)
+        pos = np.minimum(np.searchsorted(self.fid, f), len(self.fid) - 1)
+        return pos if bool((self.fid[pos] == f).all()) else None
+
+
+#: Bytes per stored vertex a dataset pack holds, about (to decide whether a dataset fits the contour memory).
+PACK_BYTES_PER_VERTEX = 120
+
+
 class Renderer:
     """Renders tiles and /simplify answers from a store, with in-memory caches.
 
@@ -280,14 +395,13 @@ class Renderer:
     ) -> None:
         self.store = store
         self.options = options or TileOptions()
-        self.contours: LRUCache[int, PreparedContour] = LRUCache(
-            contour_cache_bytes, lambda r: r.nbytes + 1024
-        )
-        self.baselines: LRUCache[tuple[int, str, int], tuple[Coords, Coords]] = LRUCache(
-            baseline_cache_entries
-        )
+        self.contours: LRUCache[int, PreparedContour] = LRUCache(contour_cache_bytes, lambda r: r.nbytes + 1024)
+        self.baselines: LRUCache[tuple[int, str, int], tuple[Coords, Coords]] = LRUCache(baseline_cache_entries)
         self._info: dict[str, tuple[DatasetInfo, float | None]] = {}
         self._transformers: dict[str, Callable[[Any], Coords]] = {}
+        self.contour_cache_bytes = contour_cache_bytes
+        self._packs: dict[str, DatasetPack] = {}
+        self._pack_lock = threading.Lock()
 
     # -- metadata ----------------------------------------------------------------------------------------
     def info(self, dataset: str) -> tuple[DatasetInfo, float | None]:
@@ -307,12 +421,7 @@ class Renderer:
         if not interval:
             con = self.store._con()
             elev = np.array(
-                [
-                    r[0]
-                    for r in con.execute(
-                        "SELECT DISTINCT elevation FROM contours WHERE dataset=?", (dataset,)
-                    )
-                ]
+                [r[0] for r in con.execute("SELECT DISTINCT elevation FROM contours WHERE dataset=?", (dataset,))]
             )
             interval = infer_interval(elev) if len(elev) else None
         self._info[dataset] = (info, interval)
@@ -321,6 +430,24 @@ class Renderer:
     def forget(self, dataset: str) -> None:
         """Drop cached metadata of a dataset (after a delete or rebuild; contour rows get new fids anyway)."""
         self._info.pop(dataset, None)
+        self._packs.pop(dataset, None)
+
+    def pack(self, dataset: str) -> DatasetPack | None:
+        """The dataset's contours packed for tiles (built once per data version), or None when the dataset is
+        larger than the contour memory (tiles then go contour by contour through the LRU cache)."""
+        info, interval = self.info(dataset)
+        pack = self._packs.get(dataset)
+        if pack is not None and pack.data_version == info.data_version:
+            return pack
+        if info.n_vertices * PACK_BYTES_PER_VERTEX > self.contour_cache_bytes:
+            return None
+        with self._pack_lock:
+            pack = self._packs.get(dataset)
+            if pack is None or pack.data_version != info.data_version:
+                recs = self.store.load(self.store.all_fids(dataset))
+                pack = DatasetPack.of(info.data_version, recs, interval)
+                self._packs[dataset] = pack
+        return pack
 
     def records(self, fids: Sequence[int]) -> list[ContourRecord]:
         """Decoded contour rows, from the cache or the store."""
@@ -338,9 +465,7 @@ class Renderer:
         return [r for r in out if r is not None]
 
     # -- geometry per method -----------------------------------------------------------------------------
-    def _baseline(
-        self, info: DatasetInfo, rec: ContourRecord, method: str, scale: float
-    ) -> tuple[Coords, Coords]:
+    def _baseline(self, info: DatasetInfo, rec: ContourRecord, method: str, scale: float) -> tuple[Coords, Coords]:
         """(EPSG:3857 closed path, working-CRS coordinates) of a baseline's result at a scale (cached)."""
         from engine.baselines import simplify_at_scale
 
@@ -350,9 +475,7 @@ class Renderer:
         if hit is not None:
             return hit
         snapped = 2.0 ** (step / SCALE_STEPS_PER_OCTAVE)
-        result_w = np.asarray(
-            simplify_at_scale(method, rec.original_w, rec.closed, snapped), dtype=np.float64
-        )
+        result_w = np.asarray(simplify_at_scale(method, rec.original_w, rec.closed, snapped), dtype=np.float64)
         tr = self._transformers.get(info.working_crs)
         if tr is None:
             tr = self._transformers[info.working_crs] = make_transformer(info.working_crs, WEB_MERCATOR)
@@ -506,6 +629,17 @@ class Renderer:
         fids = self.store.query(dataset, box)
         if not fids:
             return TileResult(None, 0, zoomf, scale)
+        if method in ("ccsm", "original"):
+            pack = self.pack(dataset)
+            where = pack.locate(fids) if pack is not None else None
+            if pack is not None and where is None:  # the store changed under the pack: take the new version
+                self.forget(dataset)
+                info, interval = self.info(dataset)
+                pack = self.pack(dataset)
+                where = pack.locate(fids) if pack is not None else None
+            if pack is not None and where is not None:
+                data, n = self._packed_tile(pack, where, info, scale, method, t_pin, bounds, box)
+                return TileResult(data, n, zoomf, scale)
         preps = self.prepared(fids)
         keep = self._visible([p.rec for p in preps], scale, method)
         preps = [preps[i] for i in keep]
@@ -520,6 +654,156 @@ class Renderer:
         if not features:
             return TileResult(None, 0, zoomf, scale)
         return TileResult(encode_tile({opts.layer: features}, opts.extent), len(features), zoomf, scale)
+
+    def _packed_tile(
+        self,
+        pack: DatasetPack,
+        where: NDArray[np.intp],
+        info: DatasetInfo,
+        scale: float,
+        method: str,
+        t_pin: float | None,
+        bounds: Bounds,
+        box: Bounds,
+    ) -> tuple[bytes | None, int]:
+        """A ccsm or original tile from the dataset pack: (MVT bytes or None, number of features).
+
+        Every step runs over all the tile's contours at once: chunk culling, row significance, slicing,
+        quantising, dropping repeats, the inside test; only pieces crossing the buffered tile's edge go
+        through shapely.
+        """
+        opts = self.options
+        idx = where if method == "original" else where[scale < pack.vanish[where]]
+        if len(idx) == 0:
+            return None, 0
+        if method == "ccsm" and t_pin is not None:
+            ts = np.full(len(idx), t_pin)
+        else:
+            ts = t_at_scales(info.ladder, pack.tables[idx], scale)
+        lines = pack.ccs if method == "ccsm" else pack.orig
+        # Chunks of the tile's contours that meet the box, merged into runs of rows.
+        c_lo, c_hi = lines.chunk_off[idx], lines.chunk_off[idx + 1]
+        ci = ranges(c_lo, c_hi)
+        ch = lines.chunks[ci]
+        hit = (ch[:, 2] >= box.minx) & (ch[:, 0] <= box.maxx) & (ch[:, 3] >= box.miny) & (ch[:, 1] <= box.maxy)
+        h = np.flatnonzero(hit)
+        if len(h) == 0:
+            return None, 0
+        owner_of_chunk = np.repeat(np.arange(len(idx)), c_hi - c_lo)
+        hc, own = ci[h], owner_of_chunk[h]
+        cut = np.flatnonzero((np.diff(hc) != 1) | (np.diff(own) != 0))
+        first = np.concatenate([[0], cut + 1])
+        last = np.concatenate([cut, [len(h) - 1]])
+        run_owner = own[first]
+        c = idx[run_owner]
+        row0 = lines.off[c]
+        a = row0 + (hc[first] - lines.chunk_off[c]) * CHUNK_ROWS
+        b = np.minimum(row0 + (hc[last] - lines.chunk_off[c] + 1) * CHUNK_ROWS + 1, lines.off[c + 1])
+        run_len = b - a
+        rows = ranges(a, b)
+        # Rows whose significance is below half a grid unit cannot move the quantised line (engine.rowsig).
+        min_sig = 0.5 * (box.maxx - box.minx) / (opts.extent + 2 * opts.buffer_px)
+        run_t = ts[run_owner]
+        if method == "ccsm":
+            at_top = run_t >= 1.0  # drawn at the target: the target's own significance decides
+            if not at_top.any():
+                sig = lines.sig[rows, 0]
+            elif at_top.all():
+                sig = lines.sig[rows, 1]
+            else:
+                sig = lines.sig[rows, np.repeat(at_top.astype(np.intp), run_len)]
+        else:
+            sig = lines.sig[rows]
+        keep = sig > min_sig
+        run_start = np.cumsum(run_len) - run_len
+        keep[run_start] = True
+        keep[run_start + run_len - 1] = True
+        q, plen = self._quantised_runs(
+            pack, method, rows[keep], np.add.reduceat(keep, run_start, dtype=np.int64), run_t, bounds, opts.extent
+        )
+        if method == "ccsm":
+            # A contour drawn at the target smaller than a grid cell keeps all its rows, so that it shows as
+            # the full line does (a dot straddling a cell edge) instead of vanishing with its dropped rows.
+            small = np.flatnonzero((plen < 2) & (run_t >= 1.0) & (run_len > 2))
+            if len(small):
+                q2, plen2 = self._quantised_runs(
+                    pack, method, ranges(a[small], b[small]), run_len[small], run_t[small], bounds, opts.extent
+                )
+                start = np.cumsum(plen) - plen
+                start[small] = len(q) + np.cumsum(plen2) - plen2
+                plen[small] = plen2
+                q = np.concatenate([q, q2])[ranges(start, start + plen)]
+        pstart = np.cumsum(plen) - plen
+        lo, hi = -opts.buffer_px, opts.extent + opts.buffer_px
+        qx, qy = q[:, 0], q[:, 1]
+        inside = (
+            (np.minimum.reduceat(qx, pstart) >= lo)
+            & (np.minimum.reduceat(qy, pstart) >= lo)
+            & (np.maximum.reduceat(qx, pstart) <= hi)
+            & (np.maximum.reduceat(qy, pstart) <= hi)
+        )
+        valid = plen >= 2
+        k_in = np.flatnonzero(valid & inside)
+        k_cross = np.flatnonzero(valid & ~inside)
+        if len(k_cross):
+            cross_pts = q[ranges(pstart[k_cross], pstart[k_cross] + plen[k_cross])]
+            c_pts, c_len, c_src = clip_lines(cross_pts, plen[k_cross], lo, hi)
+            k_clip = k_cross[c_src]
+        else:
+            c_pts, c_len, k_clip = np.zeros((0, 2), dtype=np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
+        n_parts = len(k_in) + len(k_clip)
+        if n_parts == 0:
+            return None, 0
+        # Parts of a feature: its pieces wholly inside, then the clipped ones, each in line order.
+        part_owner = np.concatenate([run_owner[k_in], run_owner[k_clip]])
+        part_group = np.concatenate([np.zeros(len(k_in), np.int8), np.ones(len(k_clip), np.int8)])
+        part_start = np.concatenate([pstart[k_in], len(q) + np.cumsum(c_len) - c_len])
+        part_len = np.concatenate([plen[k_in], c_len])
+        order = np.lexsort((part_group, part_owner))
+        part_owner, part_start, part_len = part_owner[order], part_start[order], part_len[order]
+        all_pts = np.concatenate([q, c_pts]) if len(c_pts) else q
+        pts = all_pts[ranges(part_start, part_start + part_len)]
+        owners, counts = np.unique(part_owner, return_counts=True)
+        cs = idx[owners]
+        elev = pack.elevation[cs].tolist()
+        index = pack.index[cs].tolist()
+        t_prop = np.round(ts[owners], T_DECIMALS).tolist()
+        props = [{"elevation": e, "index": i, "t": t} for e, i, t in zip(elev, index, t_prop, strict=True)]
+        data = encode_line_tile(opts.layer, pack.fid[cs].tolist(), props, pts, part_len, counts, opts.extent)
+        return data, len(owners)
+
+    @staticmethod
+    def _quantised_runs(
+        pack: DatasetPack,
+        method: str,
+        rows: NDArray[np.int64],
+        run_len: NDArray[np.int64],
+        run_t: NDArray[np.float64],
+        bounds: Bounds,
+        extent: int = 4096,
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """Slice runs of pack rows at their t, quantise, and drop consecutive repeats inside each run.
+
+        Returns the points and the number left of each run (the first point of every run stays).
+        """
+        if method == "ccsm":
+            if (run_t >= 1.0).all():
+                xy = pack.top[rows]
+            elif (run_t <= 0.0).all():
+                xy = pack.base[rows]
+            else:
+                xy = pack.base[rows]
+                xy += np.repeat(run_t, run_len)[:, None] * (pack.top[rows] - xy)
+        else:
+            xy = pack.original[rows]
+        q = quantize(xy, bounds, extent)
+        keep = np.empty(len(q), dtype=bool)
+        keep[0] = True
+        np.not_equal(q[1:, 0], q[:-1, 0], out=keep[1:])
+        keep[1:] |= q[1:, 1] != q[:-1, 1]
+        run_start = np.cumsum(run_len) - run_len
+        keep[run_start] = True
+        return q[keep], np.add.reduceat(keep, run_start, dtype=np.int64)
 
     def _features(
         self,
@@ -576,9 +860,7 @@ class Renderer:
             if idx is None:
                 idx = index_cache[elev] = is_index(elev, interval)
             features.append(
-                LineFeature(
-                    rec.fid, parts, {"elevation": elev, "index": idx, "t": round(float(ts[i]), T_DECIMALS)}
-                )
+                LineFeature(rec.fid, parts, {"elevation": elev, "index": idx, "t": round(float(ts[i]), T_DECIMALS)})
             )
         return features
 

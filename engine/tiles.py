@@ -209,9 +209,7 @@ def chunk_bounds(rows: Sequence[NDArray[np.float64]], size: int = CHUNK_ROWS) ->
     return np.column_stack([lo, hi])
 
 
-def row_runs(
-    chunks: NDArray[np.float64], box: Bounds, m: int, size: int = CHUNK_ROWS
-) -> list[tuple[int, int]]:
+def row_runs(chunks: NDArray[np.float64], box: Bounds, m: int, size: int = CHUNK_ROWS) -> list[tuple[int, int]]:
     """Row ranges [a, b) of the chunks that meet ``box``, consecutive chunks merged."""
     hit = (
         (chunks[:, 2] >= box.minx)
@@ -243,30 +241,63 @@ def collinear_free(rows: NDArray[np.float64], rel_tol: float = 1e-9) -> NDArray[
     return np.concatenate([[0], np.flatnonzero(turn) + 1, [len(rows) - 1]])
 
 
+def ranges(starts: NDArray[np.int64], ends: NDArray[np.int64]) -> NDArray[np.int64]:
+    """The concatenation of ``arange(s, e)`` for every pair, in one pass.
+
+    >>> ranges(np.array([2, 10]), np.array([4, 13])).tolist()
+    [2, 3, 10, 11, 12]
+    """
+    lens = ends - starts
+    total = int(lens.sum())
+    if total == 0:
+        return np.zeros(0, dtype=np.int64)
+    return np.arange(total, dtype=np.int64) + np.repeat(starts - (np.cumsum(lens) - lens), lens)
+
+
+def clip_lines(
+    q: NDArray[np.int64], lens: NDArray[np.int64], lo: int, hi: int
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """:func:`clip_to_grid` of many concatenated integer polylines in one vectorised shapely call.
+
+    Returns
+    -------
+    (pts, piece_lens, src)
+        The pieces' points concatenated, each piece's length (>= 2) and the input line it comes from
+        (pieces in input order).
+    """
+    empty = np.zeros(0, dtype=np.int64)
+    if len(lens) == 0:
+        return np.zeros((0, 2), dtype=np.int64), empty, empty
+    geoms = shapely.linestrings(q.astype(np.float64), indices=np.repeat(np.arange(len(lens)), lens))
+    clipped = shapely.clip_by_rect(geoms, lo, lo, hi, hi)
+    parts, src = shapely.get_parts(clipped, return_index=True)
+    is_line = shapely.get_type_id(parts) == 1
+    parts, src = parts[is_line], src[is_line]
+    if len(parts) == 0:
+        return np.zeros((0, 2), dtype=np.int64), empty, empty
+    xy, which = shapely.get_coordinates(parts, return_index=True)
+    out = np.rint(xy).astype(np.int64)
+    keep = np.ones(len(out), dtype=bool)
+    keep[1:] = (out[1:, 0] != out[:-1, 0]) | (out[1:, 1] != out[:-1, 1]) | (which[1:] != which[:-1])
+    out, which = out[keep], which[keep]
+    counts = np.bincount(which, minlength=len(parts))
+    good = counts >= 2
+    if not good.all():
+        out = out[good[which]]
+        counts, src = counts[good], src[good]
+    return out, counts.astype(np.int64), src.astype(np.int64)
+
+
 def clip_many(lines: Sequence[NDArray[np.int64]], lo: int, hi: int) -> list[list[NDArray[np.int64]]]:
     """:func:`clip_to_grid` of many integer polylines in one vectorised shapely call; pieces per input line."""
     out: list[list[NDArray[np.int64]]] = [[] for _ in lines]
     if not lines:
         return out
     lens = np.fromiter((len(v) for v in lines), dtype=np.int64, count=len(lines))
-    coords = np.concatenate(lines).astype(np.float64)
-    geoms = shapely.linestrings(coords, indices=np.repeat(np.arange(len(lines)), lens))
-    clipped = shapely.clip_by_rect(geoms, lo, lo, hi, hi)
-    parts, src = shapely.get_parts(clipped, return_index=True)
-    is_line = shapely.get_type_id(parts) == 1
-    parts, src = parts[is_line], src[is_line]
-    if len(parts) == 0:
-        return out
-    xy, which = shapely.get_coordinates(parts, return_index=True)
-    q = np.rint(xy).astype(np.int64)
-    keep = np.ones(len(q), dtype=bool)
-    keep[1:] = np.any(q[1:] != q[:-1], axis=1) | (which[1:] != which[:-1])
-    q, which = q[keep], which[keep]
-    counts = np.bincount(which, minlength=len(parts))
+    pts, counts, src = clip_lines(np.concatenate(lines), lens, lo, hi)
     starts = np.cumsum(counts) - counts
-    for p, (s, n) in enumerate(zip(starts.tolist(), counts.tolist(), strict=True)):
-        if n >= 2:
-            out[int(src[p])].append(q[s : s + n])
+    for s, n, i in zip(starts.tolist(), counts.tolist(), src.tolist(), strict=True):
+        out[i].append(pts[s : s + n])
     return out
 
 
@@ -278,12 +309,7 @@ def row_runs_many(
     allc = np.concatenate(chunks)
     owner = np.repeat(np.arange(len(chunks)), counts)
     offset = np.cumsum(counts) - counts
-    hit = (
-        (allc[:, 2] >= box.minx)
-        & (allc[:, 0] <= box.maxx)
-        & (allc[:, 3] >= box.miny)
-        & (allc[:, 1] <= box.maxy)
-    )
+    hit = (allc[:, 2] >= box.minx) & (allc[:, 0] <= box.maxx) & (allc[:, 3] >= box.miny) & (allc[:, 1] <= box.maxy)
     idx = np.flatnonzero(hit)
     if len(idx) == 0:
         empty = np.zeros(0, dtype=np.int64)
