@@ -217,7 +217,7 @@ def encode_layer(name: str, features: Sequence[LineFeature], extent: int = DEFAU
 def encode_line_tile(
     name: str,
     ids: Sequence[int],
-    properties: Sequence[Mapping[str, PropertyValue]],
+    columns: Mapping[str, Sequence[PropertyValue]],
     pts: NDArray[np.int64],
     part_lens: NDArray[np.int64],
     part_counts: NDArray[np.int64],
@@ -227,8 +227,10 @@ def encode_line_tile(
 
     Parameters
     ----------
-    ids, properties
-        Per feature.
+    ids
+        Feature ids.
+    columns
+        Property name -> one value per feature (every feature has every property, in this order).
     pts, part_lens
         All parts of all features, concatenated feature by feature (each part >= 2 points, no two
         consecutive points equal).
@@ -242,8 +244,36 @@ def encode_line_tile(
     first[np.cumsum(counts) - counts] = True
     raw, bounds = geometry_bytes(pts, part_lens, first)
     cuts = bounds[np.concatenate([[0], np.cumsum(counts)])].tolist()
-    geometries = [raw[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
-    return _field(b"\x1a", _layer_bytes(name, ids, properties, geometries, extent))
+    keys = list(columns)
+    values: dict[tuple[type, PropertyValue], int] = {}
+    setdefault = values.setdefault
+    small = _SMALL
+    chunks = [b"\x78\x02", _field(b"\x0a", name.encode("utf-8"))]
+    append = chunks.append
+    key_tags = [small[k] for k in range(len(keys))]
+    rows = zip(*(columns[k] for k in keys), strict=True)
+    for fid, row, ga, gb in zip(ids, rows, cuts[:-1], cuts[1:], strict=True):
+        tags = b"".join(
+            [kt + varint(setdefault((type(v), v), len(values))) for kt, v in zip(key_tags, row, strict=True)]
+        )
+        geometry = raw[ga:gb]
+        body = b"".join(
+            [
+                b"\x08",
+                varint(int(fid)),
+                b"\x12",
+                small[len(tags)],
+                tags,
+                b"\x18\x02\x22",
+                varint(len(geometry)),
+                geometry,
+            ]
+        )
+        append(b"\x12" + varint(len(body)) + body)
+    chunks.extend(_field(b"\x1a", key.encode("utf-8")) for key in keys)
+    chunks.extend(_field(b"\x22", _value_bytes(value)) for (_, value) in values)
+    chunks.append(b"\x28" + varint(extent))
+    return _field(b"\x1a", b"".join(chunks))
 
 
 def encode_tile(layers: Mapping[str, Sequence[LineFeature]], extent: int = DEFAULT_EXTENT) -> bytes:

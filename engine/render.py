@@ -765,11 +765,12 @@ class Renderer:
         pts = all_pts[ranges(part_start, part_start + part_len)]
         owners, counts = np.unique(part_owner, return_counts=True)
         cs = idx[owners]
-        elev = pack.elevation[cs].tolist()
-        index = pack.index[cs].tolist()
-        t_prop = np.round(ts[owners], T_DECIMALS).tolist()
-        props = [{"elevation": e, "index": i, "t": t} for e, i, t in zip(elev, index, t_prop, strict=True)]
-        data = encode_line_tile(opts.layer, pack.fid[cs].tolist(), props, pts, part_len, counts, opts.extent)
+        columns = {
+            "elevation": pack.elevation[cs].tolist(),
+            "index": pack.index[cs].tolist(),
+            "t": [round(v, T_DECIMALS) for v in ts[owners].tolist()],
+        }
+        data = encode_line_tile(opts.layer, pack.fid[cs].tolist(), columns, pts, part_len, counts, opts.extent)
         return data, len(owners)
 
     @staticmethod

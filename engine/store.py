@@ -29,6 +29,7 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from itertools import chain
 from pathlib import Path
 from typing import Any
 
@@ -516,10 +517,10 @@ class CCSStore:
         # follows the contours near the rectangle, not the size of the store.
         cur = self._con().execute(
             "SELECT fid FROM contour_rtree WHERE maxx >= ? AND minx <= ? AND maxy >= ? AND miny <= ? "
-            "AND dataset = ?",
+            "AND dataset = ? ORDER BY fid",
             (minx, maxx, miny, maxy, dataset),
         )
-        return sorted(r[0] for r in cur)
+        return list(chain.from_iterable(cur))
 
     def all_fids(self, dataset: str) -> list[int]:
         """Every contour fid of a dataset, in input order."""
