@@ -97,6 +97,24 @@ class CCSurface:
         xy = (1.0 - vv)[:, None] * c0 + vv[:, None] * cn
         return np.column_stack([xy, vv])
 
+    def curves_to_geomdl(self):  # type: ignore[no-untyped-def]
+        """The boundary curves L0' (height 0) and Ln' (height 1) as geomdl ``BSpline.Curve`` objects (degree 3).
+
+        Only for open contours: geomdl has no periodic knot vectors.
+        """
+        from geomdl import BSpline as GeomdlBSpline
+
+        if self.closed:
+            raise SurfaceFitError("geomdl has no periodic curves; a ring's boundary cannot be exported to it")
+        curves = []
+        for spline in (self.base, self.top):
+            curve = GeomdlBSpline.Curve()
+            curve.degree = DEGREE
+            curve.ctrlpts = [[float(x), float(y)] for x, y in spline.c]
+            curve.knotvector = [float(k) for k in spline.t]
+            curves.append(curve)
+        return tuple(curves)
+
     def to_geomdl(self):  # type: ignore[no-untyped-def]
         """The surface as a geomdl ``BSpline.Surface`` (degree 3 x 3, control net N x 4).
 

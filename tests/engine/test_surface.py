@@ -164,3 +164,17 @@ def test_tessellation_parameters_insert_evenly_between_data_parameters() -> None
     params = np.array([0.0, 0.4, 1.0])
     assert_allclose(tessellation_parameters(params, 0), params, atol=0)
     assert_allclose(tessellation_parameters(params, 1), [0.0, 0.2, 0.4, 0.7, 1.0], atol=1e-15)
+
+
+def test_geomdl_boundary_curves_are_the_surface_at_heights_0_and_1() -> None:
+    rng = np.random.default_rng(11)
+    x = np.linspace(0.0, 600.0, 25)
+    initial = np.column_stack([x, 30.0 * np.sin(x / 60.0) + rng.normal(0.0, 3.0, len(x))])
+    target = np.column_stack([x, np.zeros_like(x)])
+    surface = fit_surface(initial, target, closed=False)
+    base, top = surface.curves_to_geomdl()
+    u = np.linspace(0.0, 1.0, 41)
+    assert_allclose(np.array(base.evaluate_list(list(u))), surface.evaluate(u, 0.0)[:, :2], atol=1e-6)
+    assert_allclose(np.array(top.evaluate_list(list(u))), surface.evaluate(u, 1.0)[:, :2], atol=1e-6)
+    # and the curves pass through their data points (global interpolation)
+    assert_allclose(np.array(base.evaluate_list(list(surface.params))), initial, atol=1e-6)
