@@ -15,6 +15,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 #: MVT geometry type LINESTRING.
@@ -89,10 +90,57 @@ def varint_array(values: NDArray[np.uint64]) -> tuple[NDArray[np.uint8], NDArray
     return out, starts
 
 
+@njit(cache=True)
+def _put_varint(out: np.ndarray, pos: int, v: np.uint64) -> int:  # pragma: no cover - compiled
+    while v > 0x7F:
+        out[pos] = np.uint8((v & np.uint64(0x7F)) | np.uint64(0x80))
+        v >>= np.uint64(7)
+        pos += 1
+    out[pos] = np.uint8(v)
+    return pos + 1
+
+
+@njit(cache=True)
+def _zigzag(d: np.int64) -> np.uint64:  # pragma: no cover - compiled
+    return np.uint64((d << 1) ^ (d >> 63))
+
+
+@njit(cache=True)
+def _geometry_kernel(pts, part_lens, first, out, part_start):  # pragma: no cover - compiled
+    pos = 0
+    p = 0
+    cx = np.int64(0)
+    cy = np.int64(0)
+    for j in range(len(part_lens)):
+        if first[j]:
+            cx = np.int64(0)
+            cy = np.int64(0)
+        part_start[j] = pos
+        n = part_lens[j]
+        pos = _put_varint(out, pos, np.uint64(9))  # MoveTo (1) with count 1
+        x = pts[p, 0]
+        y = pts[p, 1]
+        pos = _put_varint(out, pos, _zigzag(x - cx))
+        pos = _put_varint(out, pos, _zigzag(y - cy))
+        cx = x
+        cy = y
+        pos = _put_varint(out, pos, np.uint64(((n - 1) << 3) | 2))  # LineTo (2) with count n - 1
+        for i in range(p + 1, p + n):
+            x = pts[i, 0]
+            y = pts[i, 1]
+            pos = _put_varint(out, pos, _zigzag(x - cx))
+            pos = _put_varint(out, pos, _zigzag(y - cy))
+            cx = x
+            cy = y
+        p += n
+    part_start[len(part_lens)] = pos
+    return pos
+
+
 def geometry_bytes(
     pts: NDArray[np.int64], part_lens: NDArray[np.int64], first_of_feature: NDArray[np.bool_]
 ) -> tuple[bytes, NDArray[np.int64]]:
-    """Geometry command streams of many line parts at once.
+    """Geometry command streams of many line parts at once (MoveTo/LineTo with zigzag deltas, varints).
 
     Parameters
     ----------
@@ -110,28 +158,13 @@ def geometry_bytes(
         The concatenated encodings and the byte offset where each part's stream starts, plus the total
         length as a last entry.
     """
-    lens = np.asarray(part_lens, dtype=np.int64)
-    pts = np.asarray(pts).astype(np.int64, copy=False)
-    starts = np.cumsum(lens) - lens
-    delta = np.empty_like(pts)
-    delta[0] = pts[0]
-    delta[1:] = pts[1:] - pts[:-1]
-    fs = starts[first_of_feature]
-    delta[fs] = pts[fs]
-    zz = ((delta << 1) ^ (delta >> 63)).astype(np.uint64)
-
-    slots = 2 * lens + 2  # MoveTo, dx, dy, LineTo, then two per remaining point
-    offsets = np.cumsum(slots) - slots
-    stream = np.empty(int(slots.sum()), dtype=np.uint64)
-    stream[offsets] = 9  # MoveTo (1) with count 1
-    stream[offsets + 3] = ((lens - 1) << 3) | 2  # LineTo (2) with count n - 1
-    # Slot of each point: its part's offset + 1, two per point, plus one for the LineTo after the first.
-    pos = np.repeat(offsets + 2 - 2 * starts, lens) + 2 * np.arange(len(pts), dtype=np.int64)
-    pos[starts] -= 1
-    stream[pos] = zz[:, 0]
-    stream[pos + 1] = zz[:, 1]
-    data, byte_starts = varint_array(stream)
-    return data.tobytes(), np.append(byte_starts[offsets], len(data))
+    pts = np.ascontiguousarray(pts, dtype=np.int64)
+    lens = np.ascontiguousarray(part_lens, dtype=np.int64)
+    first = np.ascontiguousarray(first_of_feature, dtype=np.bool_)
+    out = np.empty(10 * (2 * len(pts) + 2 * len(lens)), dtype=np.uint8)
+    starts = np.empty(len(lens) + 1, dtype=np.int64)
+    n = _geometry_kernel(pts, lens, first, out, starts)
+    return out[:n].tobytes(), starts
 
 
 def geometry_streams(features: Sequence[LineFeature]) -> list[bytes]:
