@@ -42,6 +42,7 @@ from engine.tiles import (
     quantize,
     ranges,
     row_runs_many,
+    slice_runs,
     tile_bounds,
     tile_center_latitude,
 )
@@ -699,49 +700,44 @@ class Renderer:
         row0 = lines.off[c]
         a = row0 + (hc[first] - lines.chunk_off[c]) * CHUNK_ROWS
         b = np.minimum(row0 + (hc[last] - lines.chunk_off[c] + 1) * CHUNK_ROWS + 1, lines.off[c + 1])
-        run_len = b - a
-        rows = ranges(a, b)
         # Rows whose significance is below half a grid unit cannot move the quantised line (engine.rowsig).
         min_sig = 0.5 * (box.maxx - box.minx) / (opts.extent + 2 * opts.buffer_px)
-        run_t = ts[run_owner]
-        if method == "ccsm":
-            at_top = run_t >= 1.0  # drawn at the target: the target's own significance decides
-            if not at_top.any():
-                sig = lines.sig[rows, 0]
-            elif at_top.all():
-                sig = lines.sig[rows, 1]
-            else:
-                sig = lines.sig[rows, np.repeat(at_top.astype(np.intp), run_len)]
-        else:
-            sig = lines.sig[rows]
-        keep = sig > min_sig
-        run_start = np.cumsum(run_len) - run_len
-        keep[run_start] = True
-        keep[run_start + run_len - 1] = True
-        q, plen = self._quantised_runs(
-            pack, method, rows[keep], np.add.reduceat(keep, run_start, dtype=np.int64), run_t, bounds, opts.extent
-        )
-        if method == "ccsm":
-            # A contour drawn at the target smaller than a grid cell keeps all its rows, so that it shows as
-            # the full line does (a dot straddling a cell edge) instead of vanishing with its dropped rows.
-            small = np.flatnonzero((plen < 2) & (run_t >= 1.0) & (run_len > 2))
-            if len(small):
-                q2, plen2 = self._quantised_runs(
-                    pack, method, ranges(a[small], b[small]), run_len[small], run_t[small], bounds, opts.extent
-                )
-                start = np.cumsum(plen) - plen
-                start[small] = len(q) + np.cumsum(plen2) - plen2
-                plen[small] = plen2
-                q = np.concatenate([q, q2])[ranges(start, start + plen)]
-        pstart = np.cumsum(plen) - plen
         lo, hi = -opts.buffer_px, opts.extent + opts.buffer_px
-        qx, qy = q[:, 0], q[:, 1]
-        inside = (
-            (np.minimum.reduceat(qx, pstart) >= lo)
-            & (np.minimum.reduceat(qy, pstart) >= lo)
-            & (np.maximum.reduceat(qx, pstart) <= hi)
-            & (np.maximum.reduceat(qy, pstart) <= hi)
-        )
+        if method == "ccsm":
+            run_t = ts[run_owner]
+            # Drawn at the target: the target's own significance decides, and a contour smaller than a grid
+            # cell keeps all its rows so that it shows as the full line does instead of vanishing.
+            at_top = run_t >= 1.0
+            q, plen, pbox = slice_runs(
+                a,
+                b,
+                run_t,
+                at_top.astype(np.int64),
+                at_top,
+                lines.sig,
+                pack.base,
+                pack.top,
+                min_sig,
+                bounds,
+                opts.extent,
+            )
+        else:
+            zeros = np.zeros(len(a))
+            q, plen, pbox = slice_runs(
+                a,
+                b,
+                zeros,
+                np.zeros(len(a), np.int64),
+                np.zeros(len(a), bool),
+                lines.sig.reshape(-1, 1),
+                pack.original,
+                pack.original,
+                min_sig,
+                bounds,
+                opts.extent,
+            )
+        pstart = np.cumsum(plen) - plen
+        inside = (pbox[:, 0] >= lo) & (pbox[:, 1] >= lo) & (pbox[:, 2] <= hi) & (pbox[:, 3] <= hi)
         valid = plen >= 2
         k_in = np.flatnonzero(valid & inside)
         k_cross = np.flatnonzero(valid & ~inside)
@@ -772,39 +768,6 @@ class Renderer:
         }
         data = encode_line_tile(opts.layer, pack.fid[cs].tolist(), columns, pts, part_len, counts, opts.extent)
         return data, len(owners)
-
-    @staticmethod
-    def _quantised_runs(
-        pack: DatasetPack,
-        method: str,
-        rows: NDArray[np.int64],
-        run_len: NDArray[np.int64],
-        run_t: NDArray[np.float64],
-        bounds: Bounds,
-        extent: int = 4096,
-    ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-        """Slice runs of pack rows at their t, quantise, and drop consecutive repeats inside each run.
-
-        Returns the points and the number left of each run (the first point of every run stays).
-        """
-        if method == "ccsm":
-            if (run_t >= 1.0).all():
-                xy = pack.top[rows]
-            elif (run_t <= 0.0).all():
-                xy = pack.base[rows]
-            else:
-                xy = pack.base[rows]
-                xy += np.repeat(run_t, run_len)[:, None] * (pack.top[rows] - xy)
-        else:
-            xy = pack.original[rows]
-        q = quantize(xy, bounds, extent)
-        keep = np.empty(len(q), dtype=bool)
-        keep[0] = True
-        np.not_equal(q[1:, 0], q[:-1, 0], out=keep[1:])
-        keep[1:] |= q[1:, 1] != q[:-1, 1]
-        run_start = np.cumsum(run_len) - run_len
-        keep[run_start] = True
-        return q[keep], np.add.reduceat(keep, run_start, dtype=np.int64)
 
     def _features(
         self,

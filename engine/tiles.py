@@ -12,6 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 import shapely
+from numba import njit
 from numpy.typing import NDArray
 
 from engine.errors import InvalidParameter, TileOutOfRange
@@ -323,3 +324,113 @@ def row_runs_many(
     a = (firsts - offset[lines]) * size
     b = np.minimum((lasts - offset[lines] + 1) * size + 1, m)
     return lines, a, b
+
+
+@njit(cache=True)
+def _slice_runs_kernel(
+    a, b, run_t, col, refill, sig, base, top, min_sig, x0, y0, k, out, plen, box
+):  # pragma: no cover - compiled
+    n = 0
+    for r in range(len(a)):
+        start = n
+        t = run_t[r]
+        c = col[r]
+        full = False
+        while True:
+            n = start
+            lx = np.int64(0)
+            ly = np.int64(0)
+            last = b[r] - 1
+            for i in range(a[r], b[r]):
+                if not full and i != a[r] and i != last and not sig[i, c] > min_sig:
+                    continue
+                if t >= 1.0:
+                    x = top[i, 0]
+                    y = top[i, 1]
+                elif t <= 0.0:
+                    x = base[i, 0]
+                    y = base[i, 1]
+                else:
+                    x = base[i, 0] + t * (top[i, 0] - base[i, 0])
+                    y = base[i, 1] + t * (top[i, 1] - base[i, 1])
+                qx = np.int64(np.rint((x - x0) * k))
+                qy = np.int64(np.rint((y0 - y) * k))
+                if n > start and qx == lx and qy == ly:
+                    continue
+                out[n, 0] = qx
+                out[n, 1] = qy
+                lx = qx
+                ly = qy
+                n += 1
+            if not full and refill[r] and n - start < 2 and b[r] - a[r] > 2:
+                full = True
+                continue
+            break
+        plen[r] = n - start
+        mnx = out[start, 0]
+        mxx = mnx
+        mny = out[start, 1]
+        mxy = mny
+        for j in range(start + 1, n):
+            mnx = min(mnx, out[j, 0])
+            mxx = max(mxx, out[j, 0])
+            mny = min(mny, out[j, 1])
+            mxy = max(mxy, out[j, 1])
+        box[r, 0] = mnx
+        box[r, 1] = mny
+        box[r, 2] = mxx
+        box[r, 3] = mxy
+    return n
+
+
+def slice_runs(
+    a: NDArray[np.int64],
+    b: NDArray[np.int64],
+    run_t: NDArray[np.float64],
+    col: NDArray[np.int64],
+    refill: NDArray[np.bool_],
+    sig: NDArray[np.float32],
+    base: NDArray[np.float64],
+    top: NDArray[np.float64],
+    min_sig: float,
+    bounds: Bounds,
+    extent: int,
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """Slice, quantise and de-duplicate runs of rows in one compiled pass.
+
+    Run ``r`` covers rows [a[r], b[r]) of ``base``/``top`` (``(M, 2)`` EPSG:3857): a row is taken when it is
+    the run's first or last or its significance ``sig[row, col[r]]`` exceeds ``min_sig``; it is sliced at
+    ``run_t[r]`` (``(1 - t) base + t top``, exactly ``base`` at t <= 0 and ``top`` at t >= 1), quantised as
+    :func:`quantize` does and dropped when it lands on the previous point. A run marked ``refill`` that
+    collapses to one point is redone with all its rows (a line smaller than a grid cell shows as the full
+    line does).
+
+    Returns
+    -------
+    (q, plen, box)
+        The points of all runs concatenated, the number of each run's points, and each run's (minx, miny,
+        maxx, maxy) in grid units.
+    """
+    total = int((b - a).sum())
+    out = np.empty((max(total, 1), 2), dtype=np.int64)
+    plen = np.empty(len(a), dtype=np.int64)
+    box = np.empty((len(a), 4), dtype=np.int64)
+    k = extent / (bounds.maxx - bounds.minx)
+    n = _slice_runs_kernel(
+        np.ascontiguousarray(a, dtype=np.int64),
+        np.ascontiguousarray(b, dtype=np.int64),
+        np.ascontiguousarray(run_t, dtype=np.float64),
+        np.ascontiguousarray(col, dtype=np.int64),
+        np.ascontiguousarray(refill, dtype=np.bool_),
+        sig,
+        base,
+        top,
+        float(min_sig),
+        float(bounds.minx),
+        float(bounds.maxy),
+        float(k),
+        out,
+        plen,
+        box,
+    )
+    return out[:n], plen, box
