@@ -4,6 +4,13 @@ A tile is: R*Tree lookup of the buffered tile -> per contour t from its t(scale)
 -> slice ``(1 - t) base + t top`` (EPSG:3857) -> quantise to the tile grid (dropping repeated points) ->
 clip to the buffered tile -> encode. Decoded contour rows are kept in an LRU cache, and so are the baseline
 simplifiers' results per (contour, method, scale step), since Wang–Müller is pure Python.
+
+For ccsm and original tiles, a dataset that fits the contour memory is held as one :class:`DatasetPack`
+(every contour's rows, significance, chunk boxes and t tables concatenated, built once per data version), so
+that a tile costs a fixed number of NumPy calls plus one compiled pass over the rows it touches, whatever the
+number of contours in it (:meth:`Renderer._packed_tile`); the per-request work still follows the R*Tree
+lookup and the chunks that meet the tile, not the dataset's size. A larger dataset goes contour by contour
+through the LRU cache (the same tiles, more Python per contour).
 """
 
 from __future__ import annotations
@@ -34,6 +41,7 @@ from engine.tiles import (
     check_fractional_zoom,
     check_tile,
     chunk_bounds,
+    chunk_bounds_packed,
     clip_lines,
     clip_many,
     collinear_free,
@@ -276,14 +284,13 @@ class PackedLines:
     chunks: NDArray[np.float64]
 
     @classmethod
-    def of(
-        cls, sizes: Sequence[int], sigs: Sequence[NDArray[np.float32]], chunks: Sequence[NDArray[np.float64]]
-    ) -> PackedLines:
-        """Concatenate per-line significance and chunk arrays."""
+    def of(cls, sizes: Sequence[int], sig: NDArray[np.float32], rows: Sequence[NDArray[np.float64]]) -> PackedLines:
+        """Offsets and chunk boxes of concatenated lines (``rows``: the (M, 2) arrays the chunks cover)."""
         off = np.concatenate([[0], np.cumsum(np.asarray(sizes, dtype=np.int64))]).astype(np.int64)
-        counts = np.fromiter((len(c) for c in chunks), dtype=np.int64, count=len(chunks))
-        chunk_off = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-        return cls(off, np.concatenate(sigs), chunk_off, np.concatenate(chunks))
+        if len(sizes) == 0:
+            return cls(off, sig, np.zeros(1, np.int64), np.zeros((0, 4)))
+        chunks, chunk_off = chunk_bounds_packed(rows, off)
+        return cls(off, sig, chunk_off, chunks)
 
     @property
     def nbytes(self) -> int:
@@ -315,23 +322,20 @@ class DatasetPack:
     @classmethod
     def of(cls, data_version: int, recs: Sequence[ContourRecord], interval: float | None) -> DatasetPack:
         """Pack decoded contour rows (in fid order)."""
-        if not recs:
-            z2 = np.zeros((0, 2))
-            empty = PackedLines.of([], [np.zeros(0, np.float32)], [np.zeros((0, 4))])
-            return cls(
-                data_version,
-                np.zeros(0, np.int64),
-                np.zeros(0),
-                np.zeros(0),
-                np.zeros(0, bool),
-                np.zeros((0, 1)),
-                z2,
-                z2,
-                empty,
-                z2,
-                empty,
+        z2 = np.zeros((0, 2))
+        base = np.ascontiguousarray(np.concatenate([r.base for r in recs])) if recs else z2
+        top = np.ascontiguousarray(np.concatenate([r.top for r in recs])) if recs else z2
+        original = np.ascontiguousarray(np.concatenate([r.original for r in recs])) if recs else z2
+        ccs_sig = np.zeros((0, 2), np.float32)
+        orig_sig = np.zeros(0, np.float32)
+        if recs:
+            ccs_sig = np.ascontiguousarray(
+                np.column_stack(
+                    [np.concatenate([r.sig for r in recs]), np.concatenate([row_significance(r.top) for r in recs])]
+                ),
+                dtype=np.float32,
             )
-        ccs_sig = [np.column_stack([r.sig, row_significance(r.top)]).astype(np.float32, copy=False) for r in recs]
+            orig_sig = np.ascontiguousarray(np.concatenate([r.sig_original for r in recs]), dtype=np.float32)
         elevation = np.array([float(r.elevation) for r in recs])
         index_of = {e: is_index(e, interval) for e in set(elevation.tolist())}
         return cls(
@@ -340,16 +344,12 @@ class DatasetPack:
             np.array([r.vanish_scale for r in recs], dtype=np.float64),
             elevation,
             np.array([index_of[e] for e in elevation.tolist()], dtype=bool),
-            np.stack([r.t_at_scale for r in recs]),
-            np.ascontiguousarray(np.concatenate([r.base for r in recs])),
-            np.ascontiguousarray(np.concatenate([r.top for r in recs])),
-            PackedLines.of([len(r.base) for r in recs], ccs_sig, [chunk_bounds([r.base, r.top]) for r in recs]),
-            np.ascontiguousarray(np.concatenate([r.original for r in recs])),
-            PackedLines.of(
-                [len(r.original) for r in recs],
-                [r.sig_original for r in recs],
-                [chunk_bounds([r.original]) for r in recs],
-            ),
+            np.stack([r.t_at_scale for r in recs]) if recs else np.zeros((0, 1)),
+            base,
+            top,
+            PackedLines.of([len(r.base) for r in recs], ccs_sig, [base, top]),
+            original,
+            PackedLines.of([len(r.original) for r in recs], orig_sig, [original]),
         )
 
     @property

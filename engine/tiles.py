@@ -210,6 +210,28 @@ def chunk_bounds(rows: Sequence[NDArray[np.float64]], size: int = CHUNK_ROWS) ->
     return np.column_stack([lo, hi])
 
 
+def chunk_bounds_packed(
+    rows: Sequence[NDArray[np.float64]], off: NDArray[np.int64], size: int = CHUNK_ROWS
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """:func:`chunk_bounds` of many lines concatenated (line i is rows [off[i], off[i + 1])) in one pass.
+
+    Returns the (C, 4) boxes of all lines' chunks, line by line, and the (n + 1,) chunk offsets per line.
+    """
+    m = np.diff(off)
+    counts = (np.maximum(m - 1, 1) + size - 1) // size
+    chunk_off = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    line = np.repeat(np.arange(len(m)), counts)
+    local = np.arange(int(chunk_off[-1]), dtype=np.int64) - chunk_off[line]
+    starts = off[line] + local * size
+    nxt = np.minimum(starts + size, off[line + 1] - 1)
+    lo = np.full((len(starts), 2), np.inf)
+    hi = np.full((len(starts), 2), -np.inf)
+    for r in rows:
+        lo = np.minimum(lo, np.minimum(np.minimum.reduceat(r, starts, axis=0), r[nxt]))
+        hi = np.maximum(hi, np.maximum(np.maximum.reduceat(r, starts, axis=0), r[nxt]))
+    return np.column_stack([lo, hi]), chunk_off
+
+
 def row_runs(chunks: NDArray[np.float64], box: Bounds, m: int, size: int = CHUNK_ROWS) -> list[tuple[int, int]]:
     """Row ranges [a, b) of the chunks that meet ``box``, consecutive chunks merged."""
     hit = (

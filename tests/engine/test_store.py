@@ -95,3 +95,22 @@ def test_not_a_store(tmp_path):
     bad.write_bytes(b"this is not sqlite" * 100)
     with pytest.raises(StoreError):
         CCSStore(bad)
+
+
+def test_packed_tiles_equal_contour_by_contour(store):
+    from engine.render import Renderer
+    from engine.tiles import Bounds, tiles_covering
+
+    packed = Renderer(store)
+    by_contour = Renderer(store, contour_cache_bytes=1)  # too small for a pack: the LRU path
+    assert by_contour.pack("h") is None and packed.pack("h") is not None
+    info = store.dataset("h")
+    n = 0
+    for z in range(8, 15):
+        for tile in tiles_covering(Bounds(*info.bounds_3857), z)[:6]:
+            for kw in ({}, {"t": 0.5}, {"method": "original"}):
+                a = packed.tile("h", *tile, **kw)
+                b = by_contour.tile("h", *tile, **kw)
+                assert (a.data is None) == (b.data is None) and a.features == b.features
+                n += a.features
+    assert n > 0

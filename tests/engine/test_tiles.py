@@ -13,12 +13,15 @@ from engine.tiles import (
     check_fractional_zoom,
     check_tile,
     chunk_bounds,
+    chunk_bounds_packed,
     clip_to_grid,
     collinear_free,
     lonlat_to_mercator,
     mercator_to_lonlat,
     quantize,
+    ranges,
     row_runs,
+    slice_runs,
     tile_bounds,
     tile_center_latitude,
     tiles_covering,
@@ -96,3 +99,41 @@ def test_collinear_free():
     rows = np.array([[0.0, 0], [1, 0], [2, 0], [2, 1], [2, 2]])
     assert collinear_free(rows).tolist() == [0, 2, 4]
     assert math.isclose(len(collinear_free(rows[:2])), 2)
+
+
+def test_chunk_bounds_packed_matches_per_line():
+    rng = np.random.default_rng(1)
+    lines = [np.cumsum(rng.normal(size=(m, 2)), axis=0) for m in (1, 2, 33, 64, 65, 200)]
+    tops = [v + 3 for v in lines]
+    off = np.concatenate([[0], np.cumsum([len(v) for v in lines])])
+    boxes, chunk_off = chunk_bounds_packed([np.concatenate(lines), np.concatenate(tops)], off)
+    for i, (b, t) in enumerate(zip(lines, tops, strict=True)):
+        assert np.array_equal(boxes[chunk_off[i] : chunk_off[i + 1]], chunk_bounds([b, t]))
+
+
+def test_ranges():
+    assert ranges(np.array([0, 5, 7]), np.array([2, 5, 9])).tolist() == [0, 1, 7, 8]
+    assert ranges(np.array([], dtype=np.int64), np.array([], dtype=np.int64)).tolist() == []
+
+
+def test_slice_runs_matches_numpy():
+    rng = np.random.default_rng(2)
+    base = np.cumsum(rng.normal(size=(300, 2)) * 50, axis=0)
+    top = base + rng.normal(size=(300, 2)) * 20
+    sig = np.abs(rng.normal(size=(300, 2))).astype(np.float32) * 30
+    bounds = Bounds(-2000.0, -2000.0, 2000.0, 2000.0)
+    a, b = np.array([0, 100, 250]), np.array([90, 240, 300])
+    run_t = np.array([0.0, 0.4, 1.0])
+    col = np.array([0, 0, 1])
+    q, plen, box = slice_runs(a, b, run_t, col, np.zeros(3, bool), sig, base, top, 10.0, bounds, 4096)
+    pieces = np.split(q, np.cumsum(plen)[:-1])
+    for r in range(3):
+        rows = np.arange(a[r], b[r])
+        keep = sig[rows, col[r]] > 10.0
+        keep[[0, -1]] = True
+        rows = rows[keep]
+        xy = base[rows] + run_t[r] * (top[rows] - base[rows]) if 0 < run_t[r] < 1 else (top if run_t[r] else base)[rows]
+        ref = quantize(xy, bounds, 4096)
+        ref = ref[np.concatenate([[True], np.any(ref[1:] != ref[:-1], axis=1)])]
+        assert np.array_equal(pieces[r], ref)
+        assert box[r].tolist() == [*ref.min(axis=0), *ref.max(axis=0)]
