@@ -433,10 +433,10 @@ class Renderer:
         self._info.pop(dataset, None)
         self._packs.pop(dataset, None)
 
-    def pack(self, dataset: str) -> DatasetPack | None:
+    def pack(self, dataset: str, meta: tuple[DatasetInfo, float | None] | None = None) -> DatasetPack | None:
         """The dataset's contours packed for tiles (built once per data version), or None when the dataset is
         larger than the contour memory (tiles then go contour by contour through the LRU cache)."""
-        info, interval = self.info(dataset)
+        info, interval = meta or self.info(dataset)
         pack = self._packs.get(dataset)
         if pack is not None and pack.data_version == info.data_version:
             return pack
@@ -631,7 +631,7 @@ class Renderer:
         if not fids:
             return TileResult(None, 0, zoomf, scale)
         if method in ("ccsm", "original"):
-            pack = self.pack(dataset)
+            pack = self.pack(dataset, (info, interval))
             where = pack.locate(fids) if pack is not None else None
             if pack is not None and where is None:  # the store changed under the pack: take the new version
                 self.forget(dataset)
