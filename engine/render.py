@@ -42,7 +42,7 @@ from engine.tiles import (
     check_tile,
     chunk_bounds,
     chunk_bounds_packed,
-    clip_lines,
+    clip_lines_fast,
     clip_many,
     collinear_free,
     lonlat_to_mercator,
@@ -743,7 +743,7 @@ class Renderer:
         k_cross = np.flatnonzero(valid & ~inside)
         if len(k_cross):
             cross_pts = q[ranges(pstart[k_cross], pstart[k_cross] + plen[k_cross])]
-            c_pts, c_len, c_src = clip_lines(cross_pts, plen[k_cross], lo, hi)
+            c_pts, c_len, c_src = clip_lines_fast(cross_pts, plen[k_cross], lo, hi)
             k_clip = k_cross[c_src]
         else:
             c_pts, c_len, k_clip = np.zeros((0, 2), dtype=np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)

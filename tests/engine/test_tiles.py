@@ -14,6 +14,8 @@ from engine.tiles import (
     check_tile,
     chunk_bounds,
     chunk_bounds_packed,
+    clip_lines,
+    clip_lines_fast,
     clip_to_grid,
     collinear_free,
     lonlat_to_mercator,
@@ -137,3 +139,27 @@ def test_slice_runs_matches_numpy():
         ref = ref[np.concatenate([[True], np.any(ref[1:] != ref[:-1], axis=1)])]
         assert np.array_equal(pieces[r], ref)
         assert box[r].tolist() == [*ref.min(axis=0), *ref.max(axis=0)]
+
+
+def test_clip_lines_fast_agrees_with_shapely():
+    import shapely
+
+    rng = np.random.default_rng(3)
+    same = total = 0
+    for _ in range(500):
+        lens = rng.integers(2, 10, size=rng.integers(1, 4))
+        q = rng.integers(-40, 41, size=(int(lens.sum()), 2))
+        a = clip_lines(q, lens, -10, 20)
+        b = clip_lines_fast(q, lens, -10, 20)
+        assert len(b[0]) == int(b[1].sum()) and (b[1] >= 2).all()
+        assert ((b[0] >= -10) & (b[0] <= 20)).all()
+        total += 1
+        if all(np.array_equal(x, y) for x, y in zip(a, b, strict=True)):
+            same += 1
+            continue
+        # Differences: a rounding tie at a crossing, or a part lying along the rectangle's edge.
+        ga = shapely.MultiLineString(np.split(a[0], np.cumsum(a[1])[:-1])) if len(a[1]) else None
+        gb = shapely.MultiLineString(np.split(b[0], np.cumsum(b[1])[:-1])) if len(b[1]) else None
+        if ga is not None and gb is not None:
+            assert shapely.hausdorff_distance(ga, gb) <= 1.5 or shapely.length(shapely.difference(ga, gb)) <= 2
+    assert same >= 0.95 * total
