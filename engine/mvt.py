@@ -247,6 +247,79 @@ def encode_layer(name: str, features: Sequence[LineFeature], extent: int = DEFAU
     )
 
 
+@njit(cache=True)
+def _varint_len(v: np.uint64) -> int:  # pragma: no cover - compiled
+    n = 1
+    while v > 0x7F:
+        v >>= np.uint64(7)
+        n += 1
+    return n
+
+
+@njit(cache=True)
+def _features_kernel(ids, vidx, geom, cuts):  # pragma: no cover - compiled
+    # Feature messages: 0x12 len { 0x08 id, 0x12 len tags, 0x18 2 (LINESTRING), 0x22 len geometry }.
+    n, k = vidx.shape
+    tag_len = np.empty(n, np.int64)
+    body_len = np.empty(n, np.int64)
+    total = 0
+    for f in range(n):
+        t = 0
+        for j in range(k):
+            t += _varint_len(np.uint64(j)) + _varint_len(np.uint64(vidx[f, j]))
+        g = cuts[f + 1] - cuts[f]
+        body = 1 + _varint_len(np.uint64(ids[f])) + 1 + _varint_len(np.uint64(t)) + t + 2
+        body += 1 + _varint_len(np.uint64(g)) + g
+        tag_len[f] = t
+        body_len[f] = body
+        total += 1 + _varint_len(np.uint64(body)) + body
+    out = np.empty(total, np.uint8)
+    pos = 0
+    for f in range(n):
+        out[pos] = 0x12
+        pos = _put_varint(out, pos + 1, np.uint64(body_len[f]))
+        out[pos] = 0x08
+        pos = _put_varint(out, pos + 1, np.uint64(ids[f]))
+        out[pos] = 0x12
+        pos = _put_varint(out, pos + 1, np.uint64(tag_len[f]))
+        for j in range(k):
+            pos = _put_varint(out, pos, np.uint64(j))
+            pos = _put_varint(out, pos, np.uint64(vidx[f, j]))
+        out[pos] = 0x18
+        out[pos + 1] = 2
+        out[pos + 2] = 0x22
+        g0 = cuts[f]
+        g1 = cuts[f + 1]
+        pos = _put_varint(out, pos + 3, np.uint64(g1 - g0))
+        out[pos : pos + g1 - g0] = geom[g0:g1]
+        pos += g1 - g0
+    return out
+
+
+def _value_table(
+    columns: Sequence[Sequence[PropertyValue]], n: int
+) -> tuple[NDArray[np.int64], list[PropertyValue]] | None:
+    """Value index of every (feature, property) and the value table, in order of first use, as the MVT
+    encoder's dict would number them; None when a column is not all floats or all bools."""
+    codes, vals = [], []
+    for col in columns:
+        arr = np.asarray(col)
+        if arr.dtype == np.bool_:
+            codes.append(np.ones(n))
+        elif arr.dtype == np.float64 and all(type(v) is float for v in col):
+            codes.append(np.zeros(n))
+        else:
+            return None
+        vals.append(arr.astype(np.float64) + 0.0)  # -0.0 and 0.0 are one value, as in a dict
+    key = np.stack([np.stack(codes, axis=1).ravel(), np.stack(vals, axis=1).ravel()], axis=1)
+    uniq, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")
+    rank = np.empty(len(order), dtype=np.int64)
+    rank[order] = np.arange(len(order))
+    table: list[PropertyValue] = [bool(v) if c == 1 else float(v) for c, v in uniq[order].tolist()]
+    return rank[inverse.ravel()].reshape(n, len(columns)), table
+
+
 def encode_line_tile(
     name: str,
     ids: Sequence[int],
@@ -276,35 +349,27 @@ def encode_line_tile(
     first = np.zeros(len(part_lens), dtype=bool)
     first[np.cumsum(counts) - counts] = True
     raw, bounds = geometry_bytes(pts, part_lens, first)
-    cuts = bounds[np.concatenate([[0], np.cumsum(counts)])].tolist()
+    cuts = bounds[np.concatenate([[0], np.cumsum(counts)])]
     keys = list(columns)
-    values: dict[tuple[type, PropertyValue], int] = {}
-    setdefault = values.setdefault
-    small = _SMALL
-    chunks = [b"\x78\x02", _field(b"\x0a", name.encode("utf-8"))]
-    append = chunks.append
-    key_tags = [small[k] for k in range(len(keys))]
-    rows = zip(*(columns[k] for k in keys), strict=True)
-    for fid, row, ga, gb in zip(ids, rows, cuts[:-1], cuts[1:], strict=True):
-        tags = b"".join(
-            [kt + varint(setdefault((type(v), v), len(values))) for kt, v in zip(key_tags, row, strict=True)]
+    numbered = _value_table([columns[k] for k in keys], len(ids))
+    if numbered is None:
+        features = [
+            LineFeature(int(i), [], dict(zip(keys, row, strict=True)))
+            for i, row in zip(ids, zip(*(columns[k] for k in keys), strict=True), strict=True)
+        ]
+        cl = cuts.tolist()
+        geometries = [raw[a:b] for a, b in zip(cl[:-1], cl[1:], strict=True)]
+        return _field(
+            b"\x1a",
+            _layer_bytes(name, [f.id for f in features], [f.properties for f in features], geometries, extent),
         )
-        geometry = raw[ga:gb]
-        body = b"".join(
-            [
-                b"\x08",
-                varint(int(fid)),
-                b"\x12",
-                small[len(tags)],
-                tags,
-                b"\x18\x02\x22",
-                varint(len(geometry)),
-                geometry,
-            ]
-        )
-        append(b"\x12" + varint(len(body)) + body)
+    vidx, table = numbered
+    body = _features_kernel(
+        np.asarray(ids, dtype=np.uint64), vidx, np.frombuffer(raw, dtype=np.uint8), cuts.astype(np.int64)
+    )
+    chunks = [b"\x78\x02", _field(b"\x0a", name.encode("utf-8")), body.tobytes()]
     chunks.extend(_field(b"\x1a", key.encode("utf-8")) for key in keys)
-    chunks.extend(_field(b"\x22", _value_bytes(value)) for (_, value) in values)
+    chunks.extend(_field(b"\x22", _value_bytes(value)) for value in table)
     chunks.append(b"\x28" + varint(extent))
     return _field(b"\x1a", b"".join(chunks))
 

@@ -4,7 +4,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from engine.mvt import LineFeature, encode_tile, encode_tile_reference, varint, varint_array
+from engine.mvt import LineFeature, encode_line_tile, encode_tile, encode_tile_reference, varint, varint_array
 from engine.tiles import drop_repeats
 
 
@@ -30,9 +30,7 @@ def test_same_tile_as_mapbox_vector_tile(features):
         ps = [drop_repeats(np.array(p, dtype=np.int64)) for p in parts]
         ps = [p for p in ps if len(p) >= 2]
         if ps:
-            feats.append(
-                LineFeature(i, ps, {"elevation": float(100 + i), "index": i % 2 == 0, "t": 0.5, "n": -i})
-            )
+            feats.append(LineFeature(i, ps, {"elevation": float(100 + i), "index": i % 2 == 0, "t": 0.5, "n": -i}))
     if not feats:
         return
     ours = decode(encode_tile({"contours": feats}))
@@ -54,3 +52,21 @@ def test_multilinestring_cursor_carries_between_parts():
 def test_extent(extent):
     f = LineFeature(0, [np.array([[0, 0], [extent, extent]])])
     assert decode(encode_tile({"contours": [f]}, extent))["contours"]["extent"] == extent
+
+
+@pytest.mark.parametrize(
+    "props",
+    [
+        [{"elevation": 400.0, "index": True, "t": 0.25}, {"elevation": 420.0, "index": False, "t": 0.25}],
+        [{"elevation": 400.0, "index": True, "t": 1.0}, {"elevation": 1.0, "index": True, "t": 0.0}],
+        [{"elevation": 400, "name": "a"}, {"elevation": 400.0, "name": "b"}],  # not all floats: the dict path
+    ],
+)
+def test_encode_line_tile_same_bytes_as_encode_tile(props):
+    parts = [[np.array([[0, 0], [10, 5], [3, 3]])], [np.array([[1, 1], [2, 9]]), np.array([[5, 5], [6, 0]])]]
+    features = [LineFeature(7 + i, p, dict(pr)) for i, (p, pr) in enumerate(zip(parts, props, strict=True))]
+    pts = np.concatenate([q for p in parts for q in p])
+    lens = np.array([len(q) for p in parts for q in p])
+    columns = {k: [pr[k] for pr in props] for k in props[0]}
+    data = encode_line_tile("contours", [7, 8], columns, pts, lens, np.array([len(p) for p in parts]))
+    assert data == encode_tile({"contours": features})
