@@ -301,23 +301,39 @@ def _value_table(
 ) -> tuple[NDArray[np.int64], list[PropertyValue]] | None:
     """Value index of every (feature, property) and the value table, in order of first use, as the MVT
     encoder's dict would number them; None when a column is not all floats or all bools."""
-    codes, vals = [], []
-    for col in columns:
+    k = len(columns)
+    groups: dict[bool, tuple[list[NDArray[np.float64]], list[NDArray[np.int64]]]] = {True: ([], []), False: ([], [])}
+    for j, col in enumerate(columns):
         arr = np.asarray(col)
         if arr.dtype == np.bool_:
-            codes.append(np.ones(n))
+            is_bool = True
         elif arr.dtype == np.float64 and all(type(v) is float for v in col):
-            codes.append(np.zeros(n))
+            is_bool = False
         else:
             return None
-        vals.append(arr.astype(np.float64) + 0.0)  # -0.0 and 0.0 are one value, as in a dict
-    key = np.stack([np.stack(codes, axis=1).ravel(), np.stack(vals, axis=1).ravel()], axis=1)
-    uniq, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    order = np.argsort(first, kind="stable")
+        groups[is_bool][0].append(arr.astype(np.float64))
+        groups[is_bool][1].append(np.arange(n, dtype=np.int64) * k + j)  # position in feature order
+    vidx = np.empty(n * k, dtype=np.int64)
+    firsts, entries, inverses, positions = [], [], [], []
+    offset = 0
+    for is_bool, (vals, pos) in groups.items():
+        if not vals:
+            continue
+        v, p = np.concatenate(vals), np.concatenate(pos)
+        uniq, inverse = np.unique(v, return_inverse=True)  # -0.0 and 0.0 are one value, as in a dict
+        first = np.full(len(uniq), n * k, dtype=np.int64)
+        np.minimum.at(first, inverse, p)
+        firsts.append(first)
+        entries.extend(bool(x) if is_bool else float(x) for x in uniq.tolist())
+        inverses.append(inverse.ravel() + offset)
+        positions.append(p)
+        offset += len(uniq)
+    order = np.argsort(np.concatenate(firsts), kind="stable")
     rank = np.empty(len(order), dtype=np.int64)
     rank[order] = np.arange(len(order))
-    table: list[PropertyValue] = [bool(v) if c == 1 else float(v) for c, v in uniq[order].tolist()]
-    return rank[inverse.ravel()].reshape(n, len(columns)), table
+    for inverse, p in zip(inverses, positions, strict=True):
+        vidx[p] = rank[inverse]
+    return vidx.reshape(n, k), [entries[i] for i in order.tolist()]
 
 
 def encode_line_tile(
