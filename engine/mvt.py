@@ -385,9 +385,23 @@ def encode_line_tile(
     )
     chunks = [b"\x78\x02", _field(b"\x0a", name.encode("utf-8")), body.tobytes()]
     chunks.extend(_field(b"\x1a", key.encode("utf-8")) for key in keys)
-    chunks.extend(_field(b"\x22", _value_bytes(value)) for value in table)
+    chunks.append(_values_bytes(table))
     chunks.append(b"\x28" + varint(extent))
     return _field(b"\x1a", b"".join(chunks))
+
+
+def _values_bytes(table: Sequence[PropertyValue]) -> bytes:
+    """The layer's ``values`` fields of float and bool values (what ``_value_bytes`` gives each), at once."""
+    if not table:
+        return b""
+    is_bool = np.fromiter((type(v) is bool for v in table), dtype=bool, count=len(table))
+    rows = np.zeros((len(table), 11), dtype=np.uint8)
+    rows[:, 0], rows[:, 1], rows[:, 2] = 0x22, 9, 0x19  # Value { double_value (fixed64) }
+    rows[:, 3:] = np.array([float(v) for v in table], dtype="<f8").view(np.uint8).reshape(-1, 8)
+    rows[is_bool, 1], rows[is_bool, 2] = 2, 0x38  # Value { bool_value (varint) }
+    rows[is_bool, 3] = np.array([bool(v) for v, b in zip(table, is_bool, strict=True) if b], dtype=np.uint8)
+    width = np.where(is_bool, 4, 11)
+    return rows[np.arange(11) < width[:, None]].tobytes()
 
 
 def encode_tile(layers: Mapping[str, Sequence[LineFeature]], extent: int = DEFAULT_EXTENT) -> bytes:
