@@ -13,6 +13,9 @@ from typing import Annotated
 from pydantic import Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
+#: The project folder (where web/ lives), so relative paths do not depend on the working directory.
+PROJECT_DIR = Path(__file__).resolve().parents[1]
+
 
 class Settings(BaseSettings):
     """Every setting of the service. Environment: ``CCSM_<FIELD>`` (case-insensitive), or a ``.env`` file."""
@@ -63,7 +66,16 @@ class Settings(BaseSettings):
         default_factory=lambda: ["*"], description="Origins allowed by CORS, comma-separated ('*' = any)."
     )
     max_upload_mb: float = Field(20.0, gt=0, description="Largest POST /datasets body, MB.")
-    web_dir: Path = Field(Path("web"), description="Directory of the web map (index.html), served at /.")
+    web_dir: Path = Field(
+        Path("web"),
+        description="Directory of the web map (index.html), served at /; a relative path is taken from the "
+        "project folder, not from where the server was started.",
+    )
+
+    @field_validator("web_dir")
+    @classmethod
+    def _web_dir_from_project(cls, value: Path) -> Path:
+        return value if value.is_absolute() else PROJECT_DIR / value
     log_level: str = Field("info", description="Log level of the service.")
 
     @field_validator("sources", "cors_origins", mode="before")
