@@ -56,6 +56,14 @@ export class MorphingContours {
       error: (e) => this._onMapError(e),
     };
     for (const [name, fn] of Object.entries(this._handlers)) map.on(name, fn);
+    // Not map.isStyleLoaded(): that is false while any source loads, i.e. whenever a buffer is pending.
+    this._styleReady = map.isStyleLoaded();
+    if (!this._styleReady) {
+      map.once('load', () => {
+        this._styleReady = true;
+        this.update();
+      });
+    }
   }
 
   /** The layer ids of the geometry currently on screen (for queryRenderedFeatures). */
@@ -116,7 +124,7 @@ export class MorphingContours {
 
   /** Called every rendered frame: start loading a new buffer when the wanted key changes. */
   update() {
-    if (!this.tilejson || !this.map.isStyleLoaded()) return;
+    if (!this.tilejson || !this._styleReady) return;
     const q = this.desiredQ;
     const key = this.keyFor(q);
     if (this.pending) {

@@ -2,15 +2,13 @@
 
 import {getJSON, request, ServiceError, formatDetail} from './api.js';
 
-/** multipart field name the service reads the file from (app/routes/datasets.py). */
-export const UPLOAD_FIELD = 'file';
 const POLL_MS = 500;
 
 const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
 
 /** 0..1 from whatever the service reports (a fraction, a percentage, or done/total counts). */
 export function progressFraction(ds) {
-  const p = ds?.progress;
+  const p = ds?.build ?? ds?.progress;
   if (typeof p === 'number') return p > 1 ? p / 100 : p;
   if (p && typeof p === 'object') {
     if (typeof p.fraction === 'number') return p.fraction;
@@ -22,7 +20,7 @@ export function progressFraction(ds) {
 }
 
 function failureMessage(ds, fileName) {
-  const why = formatDetail(ds.error ?? ds.detail ?? ds.message) || 'no reason given';
+  const why = formatDetail(ds.build?.error ?? ds.error ?? ds.detail ?? ds.message) || 'no reason given';
   return `Building “${ds.name ?? fileName}” failed: ${why}`;
 }
 
@@ -31,11 +29,14 @@ function failureMessage(ds, fileName) {
  * Resolves with the ready dataset; rejects with a ServiceError whose message can be shown as it is.
  */
 export async function uploadDataset(file, {onProgress = () => {}} = {}) {
-  const form = new FormData();
-  form.append(UPLOAD_FIELD, file, file.name);
+  // The service takes the GeoJSON document itself as the body (docs/service.md, POST /datasets).
   const name = file.name.replace(/\.(geo)?json$/i, '');
-  form.append('name', name);
-  const response = await request('/datasets', {method: 'POST', body: form}, `Upload of “${file.name}”`);
+  const url = `/datasets?${new URLSearchParams({name})}`;
+  const response = await request(
+    url,
+    {method: 'POST', body: file, headers: {'Content-Type': 'application/geo+json'}},
+    `Upload of “${file.name}”`,
+  );
   let ds = await response.json();
   if (!ds?.id) throw new ServiceError(`Upload of “${file.name}”: the service answered without a dataset id`);
   onProgress(ds, progressFraction(ds));
