@@ -40,7 +40,7 @@ CHROMIUM_ARGS = [
     "--no-first-run",
 ]
 IN_CI = os.environ.get("CI", "").lower() in {"1", "true", "yes"}
-VIEWPORT = {"width": 900, "height": 640}
+VIEWPORT = {"width": 640, "height": 480}
 SERVICE_START_S = 240.0
 
 def _free_port() -> int:

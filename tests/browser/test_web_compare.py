@@ -50,9 +50,9 @@ def test_split_view_shows_ccsm_beside_the_other_method(app):
 def test_overlay_view_draws_both_methods(app):
     app.open()
     app.page.select_option("#view", "overlay")
-    app.page.select_option("#compare", "original")
+    app.page.select_option("#compare", "vw")
     app.wait_settled()
-    assert app.page.evaluate("() => window.ccsm.layers.overlay.active.method") == "original"
+    assert app.page.evaluate("() => window.ccsm.layers.overlay.active.method") == "vw"
     assert app.rendered_lines("main") and app.rendered_lines("overlay")
     app.page.select_option("#view", "single")
     app.wait_settled()

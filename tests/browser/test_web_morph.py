@@ -30,7 +30,6 @@ def centre_on_data(app):
 
 
 def test_zoom_in_eighths_morphs_progressively(app):
-    app.page.set_viewport_size({"width": 640, "height": 480})
     app.open()
     centre = centre_on_data(app)
     # The compared box: the middle half of the view at zoom 12, the same ground at every step.
