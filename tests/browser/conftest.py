@@ -43,6 +43,7 @@ IN_CI = os.environ.get("CI", "").lower() in {"1", "true", "yes"}
 VIEWPORT = {"width": 640, "height": 480}
 SERVICE_START_S = 240.0
 
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

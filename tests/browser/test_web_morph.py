@@ -13,8 +13,8 @@ from __future__ import annotations
 import os
 
 import httpx
-import pytest
 import numpy as np
+import pytest
 from browser_geometry import chamfer_px, frame_points, lonlat_to_px
 
 pytestmark = pytest.mark.browser
@@ -37,7 +37,8 @@ def test_zoom_in_eighths_morphs_progressively(app):
     app.wait_settled()
     w, s, e, n = app.page.evaluate(
         """() => { const m = window.ccsm.maps.a, c = m.getCanvas().getBoundingClientRect();
-                   const a = m.unproject([c.width * 0.25, c.height * 0.75]), b = m.unproject([c.width * 0.75, c.height * 0.25]);
+                   const a = m.unproject([c.width * 0.25, c.height * 0.75]);
+                   const b = m.unproject([c.width * 0.75, c.height * 0.25]);
                    return [a.lng, a.lat, b.lng, b.lat]; }"""
     )
     (x0, y1), (x1, y0) = lonlat_to_px(np.array([[w, s], [e, n]]))
@@ -50,7 +51,8 @@ def test_zoom_in_eighths_morphs_progressively(app):
             window.__frames = {total: 0, blank: 0};
             m.on('render', () => {
                 const c = m.getCanvas().getBoundingClientRect(), x = c.width / 2, y = c.height / 2;
-                const n = m.queryRenderedFeatures([[x - 40, y - 40], [x + 40, y + 40]], {layers: l.visibleLayerIds}).length;
+                const box = [[x - 40, y - 40], [x + 40, y + 40]];
+                const n = m.queryRenderedFeatures(box, {layers: l.visibleLayerIds}).length;
                 window.__frames.total += 1;
                 if (n === 0) window.__frames.blank += 1;
             });

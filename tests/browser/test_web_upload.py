@@ -42,7 +42,8 @@ def test_drop_uploads_builds_and_fits(app):
     fit = app.page.evaluate(
         """() => {
             const b = window.ccsm.state.tilejson.bounds, v = window.ccsm.maps.a.getBounds();
-            return {contains: v.getWest() <= b[0] && v.getSouth() <= b[1] && v.getEast() >= b[2] && v.getNorth() >= b[3],
+            const contains = v.getWest() <= b[0] && v.getSouth() <= b[1] && v.getEast() >= b[2] && v.getNorth() >= b[3];
+            return {contains,
                     ratio: (v.getEast() - v.getWest()) / (b[2] - b[0])};
         }"""
     )

@@ -9,9 +9,8 @@ pytestmark = pytest.mark.browser
 
 
 def test_without_webgl_the_page_explains(browser, service_url):
-    from playwright.sync_api import sync_playwright  # noqa: F401  (browser fixture already started it)
-
-    b = browser.browser_type.launch(executable_path=CHROMIUM, args=[*CHROMIUM_ARGS, "--disable-webgl", "--disable-3d-apis"])
+    no_webgl = [*CHROMIUM_ARGS, "--disable-webgl", "--disable-3d-apis"]
+    b = browser.browser_type.launch(executable_path=CHROMIUM, args=no_webgl)
     try:
         page = b.new_page()
         errors = []
