@@ -4,7 +4,9 @@ The "improved Fréchet distance" is the discrete Fréchet distance after both cu
 spaced with the same number of points. The count comes from the initial contour's length at a fixed spacing
 (dF depends on sampling density, so a fixed count would make long and short contours incomparable), capped
 at ``max_points`` so a 200 km contour stays affordable; the cap bounds the sampling error of Sim by
-1 / (2 * max_points).
+1 / (2 * max_points). Short contours get at least ``min_points``: at 10 m a 100 m contour would have 11
+samples, and the resulting wobble of Sim (up to about 1e-3) made Sim(t) rise between neighbouring t on a
+few percent of the sample's contours; 256 samples remove most of that at negligible cost.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from engine.types import Coords
 
 DEFAULT_SPACING_M = 10.0
 DEFAULT_MAX_POINTS = 2000
+DEFAULT_MIN_POINTS = 256
 
 
 def _diagonal_bound(p: Coords, q: Coords) -> float:
@@ -48,10 +51,13 @@ def discrete_frechet_distance(p: Coords, q: Coords) -> float:
 
 
 def resample_count(
-    length_m: float, spacing_m: float = DEFAULT_SPACING_M, max_points: int = DEFAULT_MAX_POINTS
+    length_m: float,
+    spacing_m: float = DEFAULT_SPACING_M,
+    max_points: int = DEFAULT_MAX_POINTS,
+    min_points: int = DEFAULT_MIN_POINTS,
 ) -> int:
-    """Number of samples for a curve of this length: one per ``spacing_m``, at least 2, at most ``max_points``."""
-    return int(min(max(2, round(length_m / spacing_m) + 1), max_points))
+    """Samples for a curve of this length: one per ``spacing_m``, at least ``min_points``, at most ``max_points``."""
+    return int(min(max(min_points, 2, round(length_m / spacing_m) + 1), max_points))
 
 
 @dataclass(frozen=True)

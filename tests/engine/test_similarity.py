@@ -151,13 +151,35 @@ def test_improved_frechet_is_the_distance_after_equal_count_resampling() -> None
 
 
 @pytest.mark.parametrize(
-    ("length", "spacing", "cap", "expected"),
-    [(100.0, 10.0, 2000, 11), (0.0, 10.0, 2000, 2), (1e6, 10.0, 2000, 2000), (104.0, 10.0, 2000, 11)],
+    ("length", "spacing", "floor", "cap", "expected"),
+    [
+        (100.0, 10.0, 2, 2000, 11),
+        (0.0, 10.0, 0, 2000, 2),
+        (1e6, 10.0, 256, 2000, 2000),
+        (104.0, 10.0, 2, 2000, 11),
+        (100.0, 10.0, 256, 2000, 256),
+        (5000.0, 10.0, 256, 2000, 501),
+    ],
 )
-def test_resample_count_is_one_per_spacing_at_least_two_at_most_the_cap(
-    length: float, spacing: float, cap: int, expected: int
+def test_resample_count_is_one_per_spacing_between_the_floor_and_the_cap(
+    length: float, spacing: float, floor: int, cap: int, expected: int
 ) -> None:
-    assert resample_count(length, spacing, cap) == expected
+    assert resample_count(length, spacing, cap, floor) == expected
+
+
+@pytest.mark.parametrize("contour_id", ["560:49", "260:6", "740:12"])
+def test_short_sample_contours_have_a_falling_ccsm_similarity(contour_id: str) -> None:
+    # Three short contours of the sample (113 m, 432 m, 1.3 km) whose Sim rose between neighbouring levels
+    # when they were resampled at one point per 10 m only (12, 44, 129 samples): sampling wobble, not shape.
+    from engine.evaluation.levels import eval_params
+    from engine.evaluation.pipeline import evaluate_contour
+    from engine.io import read_source
+    from engine.sample import sample_contours_path
+
+    contour = next(c for c in read_source(sample_contours_path()).contours if str(c.id) == contour_id)
+    result = evaluate_contour(0, contour, 100, eval_params("extreme", 50_000, 500_000))
+    ccsm = result.sims[0]
+    assert np.all(np.diff(ccsm) <= 1e-9), np.diff(ccsm).max()
 
 
 def test_similarity_reference_rejects_a_zero_length_contour() -> None:
