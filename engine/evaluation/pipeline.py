@@ -274,6 +274,10 @@ class Evaluation:
         """(n, methods) each contour's largest consecutive-level jump per method."""
         return np.max(np.abs(np.diff(self.sims, axis=2)), axis=2)
 
+    def contour_rises(self) -> NDArray[np.float64]:
+        """(n, methods) each contour's largest rise of Sim from one level to the next (0 if it never rises)."""
+        return np.maximum(np.max(np.diff(self.sims, axis=2), axis=2), 0.0)
+
     def mean_curve_jumps(self) -> NDArray[np.float64]:
         """(methods,) the largest jump of each method's mean curve."""
         return np.array([largest_jump(c) for c in self.mean_curve()])

@@ -18,6 +18,8 @@ LABELS = {"ccsm": "CCSM", "dp": "DP", "wm": "WM", "vw": "VW"}
 COLOURS = {"ccsm": "#e6a100", "dp": "#1f5fbf", "wm": "#2a9d3a", "vw": "#b03a8c"}
 #: Levels whose mean similarity the summary lists (1-based, as the paper numbers them), for 100 levels.
 HEADLINE_LEVELS = (1, 25, 50, 75, 100)
+#: A rise of Sim from one level to the next smaller than this is rounding, not a rise.
+RISE_TOLERANCE = 1e-9
 
 FILES = (
     "fig10_similarity.csv",
@@ -86,7 +88,7 @@ def write_report(
     fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
     for k, m in enumerate(methods):
         ax.plot(lv, mean[k], label=LABELS[m], color=COLOURS[m], lw=1.8 if m == "ccsm" else 1.3)
-    ax.set_xlabel("level i (1 = initial contour, %d = most simplified)" % ev.levels)
+    ax.set_xlabel(f"level i (1 = initial contour, {ev.levels} = most simplified)")
     ax.set_ylabel("mean similarity")
     ax.set_title(f"Fig. 10: shape similarity by level ({n} contours)")
     ax.grid(alpha=0.3)
@@ -98,6 +100,7 @@ def write_report(
     # Jumps
     cj = ev.contour_jumps()
     mj = ev.mean_curve_jumps()
+    cr = ev.contour_rises()
     at = [int(np.argmax(np.abs(np.diff(mean[k])))) + 1 for k in range(len(methods))]
     _write_csv(
         out / "jumps.csv",
@@ -108,13 +111,27 @@ def write_report(
             "contour_jump_max",
             "mean_curve_jump",
             "mean_curve_jump_at_level",
+            "contours_rising",
+            "contour_rise_max",
+            "mean_curve_rise_max",
         ],
         (
-            [m, cj[:, k].mean(), float(np.median(cj[:, k])), cj[:, k].max(), mj[k], at[k]]
+            [
+                m,
+                cj[:, k].mean(),
+                float(np.median(cj[:, k])),
+                cj[:, k].max(),
+                mj[k],
+                at[k],
+                int(np.count_nonzero(cr[:, k] > RISE_TOLERANCE)),
+                cr[:, k].max(),
+                max(float(np.max(np.diff(mean[k]))), 0.0),
+            ]
             for k, m in enumerate(methods)
         ),
         comment="largest |Sim(i+1) - Sim(i)| per contour (mean/median/max over contours) and of the mean curve; "
-        "jump_at_level = i of the pair (i, i+1), 1-based",
+        "jump_at_level = i of the pair (i, i+1), 1-based; contours_rising = contours whose Sim rises by more "
+        f"than {RISE_TOLERANCE:g} between two levels somewhere",
     )
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.8), dpi=120)
     x = np.arange(len(methods))
@@ -196,7 +213,8 @@ def write_report(
         out / "fig11_linear_density.csv",
         ["contour", "id", *methods],
         ([k + 1, t.contour_id, *[t.linear_density[m] for m in methods]] for k, t in enumerate(tables)),
-        comment="eq. 12: length / area(buffer(width = std of positional error)), 1/m, mean over the contour's same-scale groups",
+        comment="eq. 12: length / area(buffer(width = std of positional error)), 1/m, "
+        "mean over the contour's same-scale groups",
     )
     fig, ax = plt.subplots(figsize=(9, 4), dpi=120)
     xs = np.arange(1, len(tables) + 1)
@@ -233,7 +251,8 @@ def write_report(
             ]
             for m in methods
         ),
-        comment="eq. 13: distance of every initial vertex to the simplified polyline, pooled over the same-scale results",
+        comment="eq. 13: distance of every initial vertex to the simplified polyline, "
+        "pooled over the same-scale results",
     )
 
     _write_summary(out / "summary.md", ev, source, runtime_s, mj, cj, errors)
@@ -270,16 +289,20 @@ def _write_summary(
     for i in hl:
         lines.append(f"| {i} | " + " | ".join(f"{mean[k, i - 1]:.4f}" for k in range(len(methods))) + " |")
     rises = [float(np.max(np.diff(mean[k]))) for k in range(len(methods))]
+    cr = ev.contour_rises()
     lines += [
         "",
         "## Largest jump between consecutive levels",
         "",
-        "| method | mean curve | per contour, mean | per contour, max | largest rise of the mean curve |",
-        "|---|---|---|---|---|",
+        "| method | mean curve | per contour, mean | per contour, max | largest rise of the mean curve "
+        f"| contours whose Sim rises (> {RISE_TOLERANCE:g}) | largest rise of one contour |",
+        "|---|---|---|---|---|---|---|",
     ]
     for k, m in enumerate(methods):
+        rising = int(np.count_nonzero(cr[:, k] > RISE_TOLERANCE))
         lines.append(
-            f"| {LABELS[m]} | {mj[k]:.4f} | {cj[:, k].mean():.4f} | {cj[:, k].max():.4f} | {max(rises[k], 0.0):.2e} |"
+            f"| {LABELS[m]} | {mj[k]:.4f} | {cj[:, k].mean():.4f} | {cj[:, k].max():.4f} | {max(rises[k], 0.0):.2e} "
+            f"| {rising} of {len(cr)} | {cr[:, k].max():.2e} |"
         )
     lines += [
         "",
@@ -290,8 +313,9 @@ def _write_summary(
     ]
     for m in methods:
         rows = [r for r in ev.crossings if r[0] == m]
+        with_any = sum(1 for r in rows if r[2] > 0)
         lines.append(
-            f"| {LABELS[m]} | {sum(1 for r in rows if r[2] > 0)} of {len(rows)} | {max(r[2] for r in rows)} | {max(r[3] for r in rows)} |"
+            f"| {LABELS[m]} | {with_any} of {len(rows)} | {max(r[2] for r in rows)} | {max(r[3] for r in rows)} |"
         )
     tables = ev.table_contours
     if tables:

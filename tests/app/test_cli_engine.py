@@ -225,4 +225,6 @@ def test_evaluate_ccsm_curve_is_continuous(evaluation_dir: Path) -> None:
     jumps = {r["method"]: r for r in read_csv(evaluation_dir / "jumps.csv")}
     assert float(jumps["ccsm"]["mean_curve_jump"]) < float(jumps["dp"]["mean_curve_jump"])
     assert float(jumps["ccsm"]["contour_jump_mean"]) < float(jumps["dp"]["contour_jump_mean"])
+    assert float(jumps["ccsm"]["mean_curve_rise_max"]) <= 1e-9
+    assert int(jumps["ccsm"]["contours_rising"]) <= int(jumps["dp"]["contours_rising"])
     assert math.isfinite(dp[-1])
