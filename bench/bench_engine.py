@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import platform
 import resource
 import sys
@@ -65,7 +66,8 @@ def main() -> None:
     n = len(cs.contours)
     nv = sum(c.n_vertices for c in cs.contours)
     print(
-        f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}, workers {args.workers}"
+        f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        f"python {platform.python_version()}, workers {args.workers}"
     )
     print(f"sample: {n} contours, {nv} vertices, {sum(c.closed for c in cs.contours)} rings")
 
