@@ -76,11 +76,14 @@ def main() -> None:
     )  # JIT warm-up
     seconds, built = time_build(cs, params, args.workers)
     surfaces = built.surfaces  # type: ignore[attr-defined]
-    print(f"build (surfaces + similarity tables + scale model): {seconds:.2f} s")
+    print(f"build (surfaces + similarity tables + scale model + crossing repair): {seconds:.2f} s")
     print(
         f"  {1000 * seconds / n:.2f} ms per contour, {1000 * seconds / (nv / 1000):.1f} ms per 1,000 input vertices"
     )
-    print(f"  built {len(surfaces)}, bad {len(built.bad_features)}")  # type: ignore[attr-defined]
+    print(
+        f"  built {len(surfaces)}, bad {len(built.bad_features)}, "  # type: ignore[attr-defined]
+        f"rebuilt with a finer target so no slices cross: {built.repaired}"  # type: ignore[attr-defined]
+    )
 
     ts = np.linspace(0.0, 1.0, args.slices)
     t0 = time.perf_counter()
