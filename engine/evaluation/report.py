@@ -46,6 +46,11 @@ def _write_csv(path: Path, header: Sequence[str], rows: Iterable[Sequence[Any]],
             w.writerow([_fmt(v) for v in row])
 
 
+def _every_level(step: int) -> str:
+    """"every level", or "one level in 5 (a subset)"."""
+    return "every level" if step == 1 else f"one level in {step} (a subset)"
+
+
 def _fmt(v: Any) -> Any:
     if isinstance(v, float | np.floating):
         return "nan" if not math.isfinite(float(v)) else f"{float(v):.9g}"
@@ -157,8 +162,9 @@ def write_report(
         out / "crossings.csv",
         ["method", "level", "pairs_intersecting", "pairs_crossing"],
         ([m, lvl + 1, hit, cross] for m, lvl, hit, cross in ev.crossings),
-        comment=f"pairs of different contours that meet / properly cross at a level (1-based); every "
-        f"{ev.crossing_step}th level counted" + (" (a subset)" if ev.crossing_step > 1 else " (all levels)"),
+        comment="pairs of different contours that meet / properly cross at a level (1-based); "
+        + _every_level(ev.crossing_step)
+        + " counted",
     )
     fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
     for m in methods:
@@ -306,7 +312,7 @@ def _write_summary(
         )
     lines += [
         "",
-        f"## Crossings between different contours (every {ev.crossing_step}th level)",
+        f"## Crossings between different contours ({_every_level(ev.crossing_step)})",
         "",
         "| method | levels with any | max pairs meeting | max pairs crossing |",
         "|---|---|---|---|",
