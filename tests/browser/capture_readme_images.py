@@ -1,7 +1,7 @@
 """Make the README's screenshot and morph animation (docs/img/web-*.png, docs/img/morph.gif).
 
 Run against a running service:  python tests/browser/capture_readme_images.py http://127.0.0.1:8000
-Not a test (pytest does not collect it); it reuses the browser settings of conftest.py.
+Not a test (pytest does not collect it); it reuses the browser settings of chromium_launch.py.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from PIL import Image
 from playwright.sync_api import sync_playwright
 
 sys.path.insert(0, str(Path(__file__).parent))
-from conftest import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
+from chromium_launch import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
 
 OUT = Path(__file__).resolve().parents[2] / "docs" / "img"
 

@@ -23,22 +23,9 @@ from typing import Any
 
 import httpx
 import pytest
+from chromium_launch import CHROMIUM, CHROMIUM_ARGS
 
 REPO = Path(__file__).resolve().parents[2]
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = [
-    "--headless=new",
-    "--no-sandbox",
-    "--disable-gpu-sandbox",
-    "--use-gl=angle",
-    "--use-angle=swiftshader",
-    "--enable-unsafe-swiftshader",
-    # Without these Chromium keeps calling home on a machine with no outside network.
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-]
 IN_CI = os.environ.get("CI", "").lower() in {"1", "true", "yes"}
 VIEWPORT = {"width": 640, "height": 480}
 SERVICE_START_S = 240.0

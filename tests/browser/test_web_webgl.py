@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from conftest import CHROMIUM, CHROMIUM_ARGS
+from chromium_launch import CHROMIUM, CHROMIUM_ARGS
 
 pytestmark = pytest.mark.browser
 
