@@ -135,3 +135,81 @@ def test_fly_to_keeps_contours_on_screen(app):
     state = app.page.evaluate("() => window.ccsm.layers.main.state()")
     assert state["activeQ"] == 12.125
     assert state["swaps"] - swaps_before >= 2, state
+
+
+def test_mouse_wheel_zoom_morphs_through_intermediate_eighths(app):
+    # Real wheel events from Playwright's mouse, as a user's scroll wheel sends them to the canvas.
+    app.open()
+    centre = centre_on_data(app)
+    app.jump(center=centre, zoom=11.0)
+    app.wait_settled()
+    app.page.evaluate(
+        """() => {
+            const l = window.ccsm.layers.main, m = l.map;
+            window.__wheel = {blank: 0, renders: 0, active: new Set()};
+            m.on('render', () => {
+                const w = window.__wheel;
+                w.renders += 1;
+                if (!l.visibleLayerIds.length) w.blank += 1;
+                w.active.add(l.state().activeQ);
+            });
+        }"""
+    )
+    box = app.page.locator("#maps canvas").first.bounding_box()
+    app.page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    for _ in range(12):
+        app.page.mouse.wheel(0, -40)
+        app.page.wait_for_timeout(120)
+    app.wait_settled()
+    seen = app.page.evaluate(
+        """() => ({zoom: window.ccsm.maps.a.getZoom(), blank: window.__wheel.blank,
+                   renders: window.__wheel.renders, active: [...window.__wheel.active]})"""
+    )
+    assert seen["zoom"] > 11.5, seen
+    assert seen["blank"] == 0 and seen["renders"] > 0, seen
+    eighths = sorted(q for q in seen["active"] if q is not None and 11.0 < q < seen["zoom"])
+    assert len(eighths) >= 3, seen  # the geometry was swapped at several intermediate morph levels
+    assert all(abs(q * 8 - round(q * 8)) < 1e-9 for q in eighths), eighths
+
+
+def test_two_finger_pinch_morphs_through_intermediate_eighths(app):
+    # A real two-finger touch gesture sent through Chromium's input pipeline (DevTools protocol), as a
+    # phone or touch screen sends it; MapLibre's own touch handler turns it into zoom.
+    app.open()
+    centre = centre_on_data(app)
+    app.jump(center=centre, zoom=11.0)
+    app.wait_settled()
+    app.page.evaluate(
+        """() => {
+            const l = window.ccsm.layers.main, m = l.map;
+            window.__pinch = {blank: 0, renders: 0, active: new Set()};
+            m.on('render', () => {
+                const w = window.__pinch;
+                w.renders += 1;
+                if (!l.visibleLayerIds.length) w.blank += 1;
+                w.active.add(l.state().activeQ);
+            });
+        }"""
+    )
+    box = app.page.locator("#maps canvas").first.bounding_box()
+    cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    cdp = app.page.context.new_cdp_session(app.page)
+    cdp.send("Emulation.setTouchEmulationEnabled", {"enabled": True, "maxTouchPoints": 2})
+
+    def fingers(half_gap: float) -> list[dict[str, float]]:
+        return [{"x": cx - half_gap, "y": cy, "id": 0}, {"x": cx + half_gap, "y": cy, "id": 1}]
+
+    cdp.send("Input.dispatchTouchEvent", {"type": "touchStart", "touchPoints": fingers(30)})
+    for half_gap in np.linspace(30, 90, 16)[1:]:  # fingers 3x further apart: about +1.6 zoom
+        cdp.send("Input.dispatchTouchEvent", {"type": "touchMove", "touchPoints": fingers(float(half_gap))})
+        app.page.wait_for_timeout(60)
+    cdp.send("Input.dispatchTouchEvent", {"type": "touchEnd", "touchPoints": []})
+    app.wait_settled()
+    seen = app.page.evaluate(
+        """() => ({zoom: window.ccsm.maps.a.getZoom(), blank: window.__pinch.blank,
+                   renders: window.__pinch.renders, active: [...window.__pinch.active]})"""
+    )
+    assert seen["zoom"] > 12.0, seen
+    assert seen["blank"] == 0 and seen["renders"] > 0, seen
+    eighths = sorted(q for q in seen["active"] if q is not None and 11.0 < q < seen["zoom"])
+    assert len(eighths) >= 3, seen
