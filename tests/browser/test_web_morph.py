@@ -137,18 +137,18 @@ def test_fly_to_keeps_contours_on_screen(app):
     assert state["swaps"] - swaps_before >= 2, state
 
 
-def test_mouse_wheel_zoom_morphs_through_intermediate_eighths(app):
-    # Real wheel events from Playwright's mouse, as a user's scroll wheel sends them to the canvas.
+def start_at_zoom_11_and_record_swaps(app) -> tuple[float, float]:
+    """Centre the data at zoom 11, start counting renders, blank frames and the morph levels shown; return
+    the map's centre in page pixels, where a gesture should happen."""
     app.open()
-    centre = centre_on_data(app)
-    app.jump(center=centre, zoom=11.0)
+    app.jump(center=centre_on_data(app), zoom=11.0)
     app.wait_settled()
     app.page.evaluate(
         """() => {
             const l = window.ccsm.layers.main, m = l.map;
-            window.__wheel = {blank: 0, renders: 0, active: new Set()};
+            window.__gesture = {blank: 0, renders: 0, active: new Set()};
             m.on('render', () => {
-                const w = window.__wheel;
+                const w = window.__gesture;
                 w.renders += 1;
                 if (!l.visibleLayerIds.length) w.blank += 1;
                 w.active.add(l.state().activeQ);
@@ -156,43 +156,38 @@ def test_mouse_wheel_zoom_morphs_through_intermediate_eighths(app):
         }"""
     )
     box = app.page.locator("#maps canvas").first.bounding_box()
-    app.page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    return box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+
+
+def assert_morphed_through_eighths(app, min_zoom: float) -> None:
+    """After the gesture: zoomed past ``min_zoom``, never a frame without contours, and the geometry was
+    swapped at several intermediate eighths of a zoom level on the way."""
+    app.wait_settled()
+    seen = app.page.evaluate(
+        """() => ({zoom: window.ccsm.maps.a.getZoom(), blank: window.__gesture.blank,
+                   renders: window.__gesture.renders, active: [...window.__gesture.active]})"""
+    )
+    assert seen["zoom"] > min_zoom, seen
+    assert seen["blank"] == 0 and seen["renders"] > 0, seen
+    eighths = sorted(q for q in seen["active"] if q is not None and 11.0 < q < seen["zoom"])
+    assert len(eighths) >= 3, seen
+    assert all(abs(q * 8 - round(q * 8)) < 1e-9 for q in eighths), eighths
+
+
+def test_mouse_wheel_zoom_morphs_through_intermediate_eighths(app):
+    # Real wheel events from Playwright's mouse, as a user's scroll wheel sends them to the canvas.
+    cx, cy = start_at_zoom_11_and_record_swaps(app)
+    app.page.mouse.move(cx, cy)
     for _ in range(12):
         app.page.mouse.wheel(0, -40)
         app.page.wait_for_timeout(120)
-    app.wait_settled()
-    seen = app.page.evaluate(
-        """() => ({zoom: window.ccsm.maps.a.getZoom(), blank: window.__wheel.blank,
-                   renders: window.__wheel.renders, active: [...window.__wheel.active]})"""
-    )
-    assert seen["zoom"] > 11.5, seen
-    assert seen["blank"] == 0 and seen["renders"] > 0, seen
-    eighths = sorted(q for q in seen["active"] if q is not None and 11.0 < q < seen["zoom"])
-    assert len(eighths) >= 3, seen  # the geometry was swapped at several intermediate morph levels
-    assert all(abs(q * 8 - round(q * 8)) < 1e-9 for q in eighths), eighths
+    assert_morphed_through_eighths(app, min_zoom=11.5)
 
 
 def test_two_finger_pinch_morphs_through_intermediate_eighths(app):
     # A real two-finger touch gesture sent through Chromium's input pipeline (DevTools protocol), as a
     # phone or touch screen sends it; MapLibre's own touch handler turns it into zoom.
-    app.open()
-    centre = centre_on_data(app)
-    app.jump(center=centre, zoom=11.0)
-    app.wait_settled()
-    app.page.evaluate(
-        """() => {
-            const l = window.ccsm.layers.main, m = l.map;
-            window.__pinch = {blank: 0, renders: 0, active: new Set()};
-            m.on('render', () => {
-                const w = window.__pinch;
-                w.renders += 1;
-                if (!l.visibleLayerIds.length) w.blank += 1;
-                w.active.add(l.state().activeQ);
-            });
-        }"""
-    )
-    box = app.page.locator("#maps canvas").first.bounding_box()
-    cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    cx, cy = start_at_zoom_11_and_record_swaps(app)
     cdp = app.page.context.new_cdp_session(app.page)
     cdp.send("Emulation.setTouchEmulationEnabled", {"enabled": True, "maxTouchPoints": 2})
 
@@ -204,12 +199,4 @@ def test_two_finger_pinch_morphs_through_intermediate_eighths(app):
         cdp.send("Input.dispatchTouchEvent", {"type": "touchMove", "touchPoints": fingers(float(half_gap))})
         app.page.wait_for_timeout(60)
     cdp.send("Input.dispatchTouchEvent", {"type": "touchEnd", "touchPoints": []})
-    app.wait_settled()
-    seen = app.page.evaluate(
-        """() => ({zoom: window.ccsm.maps.a.getZoom(), blank: window.__pinch.blank,
-                   renders: window.__pinch.renders, active: [...window.__pinch.active]})"""
-    )
-    assert seen["zoom"] > 12.0, seen
-    assert seen["blank"] == 0 and seen["renders"] > 0, seen
-    eighths = sorted(q for q in seen["active"] if q is not None and 11.0 < q < seen["zoom"])
-    assert len(eighths) >= 3, seen
+    assert_morphed_through_eighths(app, min_zoom=12.0)
