@@ -205,10 +205,10 @@ class DatasetService:
             "target_scale": target_scale,
         }
         digest = source_hash(None, params, data=body)
-        ident = dataset or (slugify(name) if name else f"upload-{digest[:10]}")
+        ident = dataset or self._free_id(slugify(name) if name else f"upload-{digest[:10]}")
         if ident != slugify(ident):
             raise MalformedUpload(f"dataset id {ident!r} may contain only a-z, 0-9, '_' and '-'")
-        if self.store.data_version(ident) is not None or self._building(ident):
+        if self._taken(ident):
             raise DatasetExists(f"dataset {ident!r} exists already; DELETE it first or choose another id")
         self.upload_dir.mkdir(parents=True, exist_ok=True)
         path = self.upload_dir / f"{ident}-{uuid.uuid4().hex[:8]}.geojson"
@@ -219,6 +219,18 @@ class DatasetService:
             path.unlink(missing_ok=True)
             raise
         return Upload(ident, name or ident, path, digest, params), contour_set
+
+    def _taken(self, ident: str) -> bool:
+        return self.store.data_version(ident) is not None or self._building(ident)
+
+    def _free_id(self, base: str) -> str:
+        """``base``, or ``base-2``, ``base-3``, ... for an id made from a name: uploading a file of the same
+        name again makes a new dataset instead of failing (an explicit ``id`` still gets 409)."""
+        base = base[:60] or "upload"
+        ident, n = base, 2
+        while self._taken(ident):
+            ident, n = f"{base}-{n}", n + 1
+        return ident
 
     def start_upload_build(self, upload: Upload, contour_set: Any) -> None:
         """Build a validated upload in the background (one process: the server keeps the other cores)."""

@@ -36,6 +36,18 @@ def test_unknown_dataset_404(client):
     assert r.status_code == 404 and r.json()["error"] == "unknown_layer"
 
 
+def test_same_name_uploaded_twice_makes_a_second_dataset(client):
+    # An id made from the name is made unique; only an explicit id that is taken is refused (409).
+    body = json.dumps({"type": "FeatureCollection", "features": synthetic_features(seed=4)[:4]})
+    headers = {"content-type": "application/geo+json"}
+    first = client.post("/datasets?name=Same%20hills", content=body, headers=headers)
+    second = client.post("/datasets?name=Same%20hills", content=body, headers=headers)
+    assert (first.status_code, second.status_code) == (202, 202), (first.text, second.text)
+    assert (first.json()["id"], second.json()["id"]) == ("same-hills", "same-hills-2")
+    for ident in ("same-hills", "same-hills-2"):
+        assert wait_ready(client, ident)["state"] == "ready"
+    assert client.post("/datasets?id=same-hills", content=body, headers=headers).status_code == 409
+
 def test_upload_builds_in_background_then_delete(client):
     feats = synthetic_features(seed=3)[:6]
     feats.append(
