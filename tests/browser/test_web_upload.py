@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import httpx
 import pytest
 
 pytestmark = pytest.mark.browser
@@ -63,3 +64,34 @@ def test_upload_error_is_shown(app):
     )
     assert "notes.geojson" in text and "HTTP 4" in text, text
     assert "[object Object]" not in text
+
+
+def test_upload_uses_the_scales_typed_in_the_page(app):
+    app.open()
+    first = app.page.evaluate("() => window.ccsm.state.datasetId")
+    app.page.click(".upload-options summary")
+    app.page.fill("#upload-source-scale", "10000")
+    app.page.fill("#upload-target-scale", "120000")
+    drop_file(app, "small_contours.geojson", SMALL.read_text())
+    dataset = app.wait_until(
+        "(first) => window.ccsm.state.datasetId !== first && window.ccsm.state.datasetId",
+        timeout_s=60,
+        arg=first,
+        what="uploaded dataset selected",
+    )
+    scales = httpx.get(f"{app.base_url}/datasets/{dataset}").json()["scales"]
+    assert (scales["source_scale"], scales["target_scale"]) == (10000.0, 120000.0), scales
+
+
+def test_upload_with_scales_in_the_wrong_order_shows_the_service_message(app):
+    app.open()
+    app.watch.allowed_statuses.update({400, 422})
+    app.page.click(".upload-options summary")
+    app.page.fill("#upload-source-scale", "900000")
+    app.page.fill("#upload-target-scale", "100000")
+    drop_file(app, "small_contours.geojson", SMALL.read_text())
+    text = app.wait_until(
+        "() => [...document.querySelectorAll('#messages .message.error p')].map(p => p.textContent).join('\\n')",
+        what="an error message",
+    )
+    assert "small_contours.geojson" in text and "scale" in text, text

@@ -359,6 +359,10 @@ async function handleFile(file) {
   bar.removeAttribute('value');
   try {
     const ds = await uploadDataset(file, {
+      scales: {
+        source_scale: $('upload-source-scale').value.trim(),
+        target_scale: $('upload-target-scale').value.trim(),
+      },
       onProgress: (d, fraction) => {
         label.textContent = `Building ${d.name ?? file.name}: ${fraction == null ? '…' : `${Math.round(fraction * 100)} %`}`;
         if (fraction == null) bar.removeAttribute('value');

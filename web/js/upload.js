@@ -26,12 +26,16 @@ function failureMessage(ds, fileName) {
 
 /**
  * POST the file, then poll until the dataset is ready. Calls onProgress(dataset, fraction|null) on every poll.
+ * scales: optional {source_scale, target_scale} denominators as typed (strings; empty means the default).
  * Resolves with the ready dataset; rejects with a ServiceError whose message can be shown as it is.
  */
-export async function uploadDataset(file, {onProgress = () => {}} = {}) {
+export async function uploadDataset(file, {onProgress = () => {}, scales = {}} = {}) {
   // The service takes the GeoJSON document itself as the body (docs/service.md, POST /datasets).
   const name = file.name.replace(/\.(geo)?json$/i, '');
-  const url = `/datasets?${new URLSearchParams({name})}`;
+  const query = new URLSearchParams({name});
+  // Scales left empty are the service's defaults; a bad one comes back as the service's 422 message.
+  for (const [key, value] of Object.entries(scales)) if (value) query.set(key, value);
+  const url = `/datasets?${query}`;
   const response = await request(
     url,
     {method: 'POST', body: file, headers: {'Content-Type': 'application/geo+json'}},
