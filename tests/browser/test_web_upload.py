@@ -26,6 +26,19 @@ def drop_file(app, name: str, text: str, mime: str = "application/geo+json") -> 
     app.page.dispatch_event("#maps", "drop", {"dataTransfer": data_transfer})
 
 
+def type_upload_scales(app, source: str, target: str) -> None:
+    app.page.click(".upload-options summary")
+    app.page.fill("#upload-source-scale", source)
+    app.page.fill("#upload-target-scale", target)
+
+
+def shown_error(app) -> str:
+    return app.wait_until(
+        "() => [...document.querySelectorAll('#messages .message.error p')].map(p => p.textContent).join('\\n')",
+        what="an error message",
+    )
+
+
 def test_drop_uploads_builds_and_fits(app):
     app.open()
     first = app.page.evaluate("() => window.ccsm.state.datasetId")
@@ -58,10 +71,7 @@ def test_upload_error_is_shown(app):
     app.open()
     app.watch.allowed_statuses.update({400, 413, 415, 422})
     drop_file(app, "notes.geojson", "this is not GeoJSON", mime="text/plain")
-    text = app.wait_until(
-        "() => [...document.querySelectorAll('#messages .message.error p')].map(p => p.textContent).join('\\n')",
-        what="an error message",
-    )
+    text = shown_error(app)
     assert "notes.geojson" in text and "HTTP 4" in text, text
     assert "[object Object]" not in text
 
@@ -69,9 +79,7 @@ def test_upload_error_is_shown(app):
 def test_upload_uses_the_scales_typed_in_the_page(app):
     app.open()
     first = app.page.evaluate("() => window.ccsm.state.datasetId")
-    app.page.click(".upload-options summary")
-    app.page.fill("#upload-source-scale", "10000")
-    app.page.fill("#upload-target-scale", "120000")
+    type_upload_scales(app, "10000", "120000")
     drop_file(app, "small_contours.geojson", SMALL.read_text())
     dataset = app.wait_until(
         "(first) => window.ccsm.state.datasetId !== first && window.ccsm.state.datasetId",
@@ -86,12 +94,7 @@ def test_upload_uses_the_scales_typed_in_the_page(app):
 def test_upload_with_scales_in_the_wrong_order_shows_the_service_message(app):
     app.open()
     app.watch.allowed_statuses.update({400, 422})
-    app.page.click(".upload-options summary")
-    app.page.fill("#upload-source-scale", "900000")
-    app.page.fill("#upload-target-scale", "100000")
+    type_upload_scales(app, "900000", "100000")
     drop_file(app, "small_contours.geojson", SMALL.read_text())
-    text = app.wait_until(
-        "() => [...document.querySelectorAll('#messages .message.error p')].map(p => p.textContent).join('\\n')",
-        what="an error message",
-    )
+    text = shown_error(app)
     assert "small_contours.geojson" in text and "scale" in text, text
