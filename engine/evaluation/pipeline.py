@@ -226,6 +226,10 @@ def same_scale_contour(result: ContourResult, window: float = SAME_SCALE_WINDOW)
     )
 
 
+#: A rise of Sim from one level to the next smaller than this is rounding, not a rise.
+RISE_TOLERANCE = 1e-9
+
+
 @dataclass
 class Evaluation:
     """Everything ``ccsm evaluate`` writes.
@@ -277,6 +281,14 @@ class Evaluation:
     def contour_rises(self) -> NDArray[np.float64]:
         """(n, methods) each contour's largest rise of Sim from one level to the next (0 if it never rises)."""
         return np.maximum(np.max(np.diff(self.sims, axis=2), axis=2), 0.0)
+
+    def contours_rising(self) -> NDArray[np.intp]:
+        """(methods,) how many contours' Sim rises by more than ``RISE_TOLERANCE`` somewhere."""
+        return np.count_nonzero(self.contour_rises() > RISE_TOLERANCE, axis=0)
+
+    def mean_curve_rises(self) -> NDArray[np.float64]:
+        """(methods,) the largest rise of each method's mean curve (0 if it never rises)."""
+        return np.maximum(np.max(np.diff(self.mean_curve(), axis=1), axis=1), 0.0)
 
     def mean_curve_jumps(self) -> NDArray[np.float64]:
         """(methods,) the largest jump of each method's mean curve."""

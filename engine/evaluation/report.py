@@ -12,14 +12,12 @@ from typing import Any
 import numpy as np
 
 from engine.evaluation.measures import SAME_SCALE_WINDOW
-from engine.evaluation.pipeline import PAPER_METHODS, Evaluation, finite_mean, pooled_errors
+from engine.evaluation.pipeline import PAPER_METHODS, RISE_TOLERANCE, Evaluation, finite_mean, pooled_errors
 
 LABELS = {"ccsm": "CCSM", "dp": "DP", "wm": "WM", "vw": "VW"}
 COLOURS = {"ccsm": "#e6a100", "dp": "#1f5fbf", "wm": "#2a9d3a", "vw": "#b03a8c"}
 #: Levels whose mean similarity the summary lists (1-based, as the paper numbers them), for 100 levels.
 HEADLINE_LEVELS = (1, 25, 50, 75, 100)
-#: A rise of Sim from one level to the next smaller than this is rounding, not a rise.
-RISE_TOLERANCE = 1e-9
 
 FILES = (
     "fig10_similarity.csv",
@@ -47,7 +45,7 @@ def _write_csv(path: Path, header: Sequence[str], rows: Iterable[Sequence[Any]],
 
 
 def _every_level(step: int) -> str:
-    """"every level", or "one level in 5 (a subset)"."""
+    """Which levels were counted: every level, or one level in ``step`` (a subset)."""
     return "every level" if step == 1 else f"one level in {step} (a subset)"
 
 
@@ -106,6 +104,8 @@ def write_report(
     cj = ev.contour_jumps()
     mj = ev.mean_curve_jumps()
     cr = ev.contour_rises()
+    rising = ev.contours_rising()
+    mr = ev.mean_curve_rises()
     at = [int(np.argmax(np.abs(np.diff(mean[k])))) + 1 for k in range(len(methods))]
     _write_csv(
         out / "jumps.csv",
@@ -128,9 +128,9 @@ def write_report(
                 cj[:, k].max(),
                 mj[k],
                 at[k],
-                int(np.count_nonzero(cr[:, k] > RISE_TOLERANCE)),
+                int(rising[k]),
                 cr[:, k].max(),
-                max(float(np.max(np.diff(mean[k]))), 0.0),
+                mr[k],
             ]
             for k, m in enumerate(methods)
         ),
@@ -294,8 +294,9 @@ def _write_summary(
     ]
     for i in hl:
         lines.append(f"| {i} | " + " | ".join(f"{mean[k, i - 1]:.4f}" for k in range(len(methods))) + " |")
-    rises = [float(np.max(np.diff(mean[k]))) for k in range(len(methods))]
     cr = ev.contour_rises()
+    rising = ev.contours_rising()
+    mr = ev.mean_curve_rises()
     lines += [
         "",
         "## Largest jump between consecutive levels",
@@ -305,10 +306,9 @@ def _write_summary(
         "|---|---|---|---|---|---|---|",
     ]
     for k, m in enumerate(methods):
-        rising = int(np.count_nonzero(cr[:, k] > RISE_TOLERANCE))
         lines.append(
-            f"| {LABELS[m]} | {mj[k]:.4f} | {cj[:, k].mean():.4f} | {cj[:, k].max():.4f} | {max(rises[k], 0.0):.2e} "
-            f"| {rising} of {len(cr)} | {cr[:, k].max():.2e} |"
+            f"| {LABELS[m]} | {mj[k]:.4f} | {cj[:, k].mean():.4f} | {cj[:, k].max():.4f} | {mr[k]:.2e} "
+            f"| {rising[k]} of {len(cr)} | {cr[:, k].max():.2e} |"
         )
     lines += [
         "",
@@ -346,7 +346,5 @@ def _write_summary(
             e = errors[m]
             lines.append(f"| {LABELS[m]} | {e.mean_m:.2f} | {e.std_m:.2f} | {e.max_m:.2f} |")
         lines.append("")
-        lines.append(
-            f"(The paper's Table 2 used the three methods {', '.join(LABELS[m] for m in PAPER_METHODS)}.)"
-        )
+        lines.append(f"(The paper's Table 2 used the three methods {', '.join(LABELS[m] for m in PAPER_METHODS)}.)")
     path.write_text("\n".join(lines) + "\n")
