@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import rasterio
 from numpy.testing import assert_allclose
+from synthetic_rasters import write_geotiff
 
 from engine.crs import make_transformer
 from engine.errors import InvalidParameter, SourceError
@@ -38,23 +38,7 @@ def write_tif(
     nodata: float | None = None,
     north_up: bool = True,
 ) -> Path:
-    transform = rasterio.Affine(PIXEL_M, 0.0, WEST, 0.0, -PIXEL_M, NORTH)
-    if not north_up:  # row 0 at the southern edge
-        transform = rasterio.Affine(PIXEL_M, 0.0, WEST, 0.0, PIXEL_M, NORTH - PIXEL_M * z.shape[0])
-    profile = {
-        "driver": "GTiff",
-        "height": z.shape[0],
-        "width": z.shape[1],
-        "count": 1,
-        "dtype": z.dtype.name,
-        "transform": transform,
-        "nodata": nodata,
-    }
-    if crs is not None:
-        profile["crs"] = crs
-    with rasterio.open(path, "w", **profile) as dst:
-        dst.write(z, 1)
-    return path
+    return write_geotiff(path, z, west=WEST, north=NORTH, cell=PIXEL_M, crs=crs, nodata=nodata, north_up=north_up)
 
 
 def write_npz(
@@ -116,19 +100,7 @@ def test_geotiff_without_crs(tmp_path: Path) -> None:
 
 def test_geographic_geotiff_is_projected_to_utm(tmp_path: Path) -> None:
     z = cone(20, 20, (10, 10)).astype(np.float32)
-    path = tmp_path / "geo.tif"
-    with rasterio.open(
-        path,
-        "w",
-        driver="GTiff",
-        height=20,
-        width=20,
-        count=1,
-        dtype="float32",
-        crs="EPSG:4326",
-        transform=rasterio.Affine(0.001, 0.0, -84.3, 0.0, -0.001, 36.7),
-    ) as dst:
-        dst.write(z, 1)
+    path = write_geotiff(tmp_path / "geo.tif", z, west=-84.3, north=36.7, cell=0.001, crs="EPSG:4326")
     cs = read_source(path, interval=50)
     assert cs.source_crs == "EPSG:4326"
     assert cs.working_crs == "EPSG:32616"

@@ -13,13 +13,11 @@ file to the similarity curves runs on data the engine was not tuned on:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pytest
-import rasterio
 import shapely
-from rasterio.transform import Affine
+from synthetic_rasters import write_geotiff
 
 from engine.build import build_contour_set, t_for_scale_all
 from engine.evaluation.levels import rotate_ring_to
@@ -63,26 +61,17 @@ def fractal_heights(seed: int, beta: float, n: int = 128, relief_m: float = 400.
     return np.round(200.0 + (z - z.min()) / np.ptp(z) * relief_m)
 
 
-def write_geotiff(path: Path, terrain: Terrain) -> Path:
-    z = fractal_heights(terrain.seed, terrain.beta).astype("float32")
-    with rasterio.open(
-        path,
-        "w",
-        driver="GTiff",
-        height=z.shape[0],
-        width=z.shape[1],
-        count=1,
-        dtype="float32",
-        crs=terrain.crs,
-        transform=Affine(terrain.cell, 0.0, terrain.west, 0.0, -terrain.cell, terrain.north),
-    ) as dst:
-        dst.write(z, 1)
-    return path
-
-
 @pytest.fixture(scope="module", params=sorted(TERRAINS))
 def contours(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> ContourSet:
-    path = write_geotiff(tmp_path_factory.mktemp("dem") / f"{request.param}.tif", TERRAINS[request.param])
+    terrain = TERRAINS[request.param]
+    path = write_geotiff(
+        tmp_path_factory.mktemp("dem") / f"{request.param}.tif",
+        fractal_heights(terrain.seed, terrain.beta).astype("float32"),
+        west=terrain.west,
+        north=terrain.north,
+        cell=terrain.cell,
+        crs=terrain.crs,
+    )
     cs = read_source(path, interval=20.0)
     assert len(cs.contours) > 300  # a real workload, not a handful of lines
     return cs
