@@ -12,6 +12,10 @@ from hypothesis import strategies as st
 from scipy.spatial.distance import cdist
 
 from engine.errors import InvalidParameter
+from engine.evaluation.levels import eval_params
+from engine.evaluation.pipeline import evaluate_contour
+from engine.io import read_source
+from engine.sample import sample_contours_path
 from engine.similarity import (
     SimilarityReference,
     discrete_frechet_distance,
@@ -19,6 +23,7 @@ from engine.similarity import (
     resample_count,
     similarity,
 )
+from engine.types import Contour
 
 HYPOTHESIS = settings(deadline=None, max_examples=60)
 
@@ -167,17 +172,19 @@ def test_resample_count_is_one_per_spacing_between_the_floor_and_the_cap(
     assert resample_count(length, spacing, cap, floor) == expected
 
 
+@pytest.fixture(scope="module")
+def sample_by_id() -> dict[str, Contour]:
+    """The bundled sample's contours by id, read once for the tests that need real contours."""
+    return {str(c.id): c for c in read_source(sample_contours_path()).contours}
+
+
 @pytest.mark.parametrize("contour_id", ["560:49", "260:6", "740:12"])
-def test_short_sample_contours_have_a_falling_ccsm_similarity(contour_id: str) -> None:
+def test_short_sample_contours_have_a_falling_ccsm_similarity(
+    contour_id: str, sample_by_id: dict[str, Contour]
+) -> None:
     # Three short contours of the sample (113 m, 432 m, 1.3 km) whose Sim rose between neighbouring levels
     # when they were resampled at one point per 10 m only (12, 44, 129 samples): sampling wobble, not shape.
-    from engine.evaluation.levels import eval_params
-    from engine.evaluation.pipeline import evaluate_contour
-    from engine.io import read_source
-    from engine.sample import sample_contours_path
-
-    contour = next(c for c in read_source(sample_contours_path()).contours if str(c.id) == contour_id)
-    result = evaluate_contour(0, contour, 100, eval_params("extreme", 50_000, 500_000))
+    result = evaluate_contour(0, sample_by_id[contour_id], 100, eval_params("extreme", 50_000, 500_000))
     ccsm = result.sims[0]
     assert np.all(np.diff(ccsm) <= 1e-9), np.diff(ccsm).max()
 
