@@ -205,11 +205,14 @@ class DatasetService:
             "target_scale": target_scale,
         }
         digest = source_hash(None, params, data=body)
-        ident = dataset or self._free_id(slugify(name) if name else f"upload-{digest[:10]}")
-        if ident != slugify(ident):
-            raise MalformedUpload(f"dataset id {ident!r} may contain only a-z, 0-9, '_' and '-'")
-        if self._taken(ident):
-            raise DatasetExists(f"dataset {ident!r} exists already; DELETE it first or choose another id")
+        if not dataset:
+            ident = self._free_id(slugify(name) if name else f"upload-{digest[:10]}")
+        elif dataset != slugify(dataset):
+            raise MalformedUpload(f"dataset id {dataset!r} may contain only a-z, 0-9, '_' and '-'")
+        elif self._taken(dataset):
+            raise DatasetExists(f"dataset {dataset!r} exists already; DELETE it first or choose another id")
+        else:
+            ident = dataset
         self.upload_dir.mkdir(parents=True, exist_ok=True)
         path = self.upload_dir / f"{ident}-{uuid.uuid4().hex[:8]}.geojson"
         path.write_bytes(body)
