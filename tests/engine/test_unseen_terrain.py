@@ -22,6 +22,7 @@ from synthetic_rasters import write_geotiff
 from engine.build import build_contour_set, t_for_scale_all
 from engine.evaluation.levels import rotate_ring_to
 from engine.evaluation.pipeline import Evaluation, evaluate_set
+from engine.geometry import closed_path
 from engine.io import read_source
 from engine.params import BuildParams
 from engine.similarity import similarity
@@ -119,7 +120,7 @@ def test_source_scale_keeps_the_input_and_target_scale_is_t_one(contours: Contou
     for surface in rng.choice(np.array(built.surfaces, dtype=object), 60, replace=False):
         contour = by_id[surface.contour_id]
         sliced = surface.at(0.0)
-        initial = np.vstack([contour.coords, contour.coords[:1]]) if contour.closed else contour.coords
+        initial = closed_path(contour.coords) if contour.closed else contour.coords
         assert shapely.hausdorff_distance(shapely.LineString(initial), shapely.LineString(sliced)) <= 5.0
         # A ring's slices start at a characteristic point; Sim walks a ring from its first vertex, so start L0 there.
         start = rotate_ring_to(contour.coords, sliced[0]) if contour.closed else contour.coords
