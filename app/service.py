@@ -25,10 +25,10 @@ import numpy as np
 from app.errors import DatasetExists, MalformedUpload, public_message
 from app.settings import Settings
 from engine.errors import CCSMError, StoreNotReady, UnknownLayer
-from engine.render import Renderer, TileOptions
-from engine.scale import zoom_for_scale
-from engine.store import CCSStore, DatasetInfo, SourceSpec, build_dataset, slugify, source_hash
-from engine.tiles import mercator_to_lonlat
+from engine.serve.renderer import Renderer, TileOptions
+from engine.store.sqlite import CCSStore, DatasetInfo, SourceSpec, build_dataset, slugify, source_hash
+from engine.tiles.grid import mercator_to_lonlat
+from engine.tiles.scale import zoom_for_scale
 
 log = logging.getLogger("ccsm.service")
 
@@ -57,7 +57,7 @@ def specs_from_settings(settings: Settings) -> list[SourceSpec]:
             specs.append(SourceSpec(path=path, dataset=ident, name=path.stem, **common))  # type: ignore[arg-type]
         return specs
     if settings.serve_sample:
-        from engine.io import sample_contours_path
+        from engine.io.source import sample_contours_path
 
         common["elevation_field"] = None
         common["interval"] = None
@@ -184,7 +184,7 @@ class DatasetService:
         target_scale: float,
     ) -> tuple[Upload, Any]:
         """Check an uploaded GeoJSON and read its contours (raises MalformedUpload, SourceError, ...)."""
-        from engine.io import read_source
+        from engine.io.source import read_source
         from engine.params import BuildParams
 
         BuildParams(source_scale=source_scale, target_scale=target_scale)  # validates the scales
@@ -248,7 +248,7 @@ class DatasetService:
         thread.start()
 
     def _build_upload(self, upload: Upload, contour_set: Any) -> None:
-        from engine.build import build_contour_set
+        from engine.ccsm.build import build_contour_set
         from engine.params import BuildParams
 
         try:

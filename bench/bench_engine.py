@@ -23,8 +23,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from engine.build import build_contour_set  # noqa: E402
-from engine.io import read_source, sample_contours_path  # noqa: E402
+from engine.ccsm.build import build_contour_set  # noqa: E402
+from engine.io.source import read_source, sample_contours_path  # noqa: E402
 from engine.params import BuildParams  # noqa: E402
 from engine.types import ContourSet  # noqa: E402
 

@@ -17,9 +17,9 @@ import numpy as np
 
 from engine import BuildParams, build_contour_set, read_source, sample_contours_path
 from engine.baselines import simplify_at_scale
-from engine.geometry import closed_path
-from engine.regression import t_for_scale
-from engine.topology import crossing_pairs
+from engine.ccsm.regression import t_for_scale
+from engine.ccsm.topology import crossing_pairs
+from engine.geom.polyline import closed_path
 
 
 def new_pairs(lines: list[np.ndarray], ids: list[object], allowed: set[tuple[object, object]]) -> int:

@@ -11,8 +11,10 @@ Pure algorithm code: no web framework, no environment variables. See :mod:`engin
     line = ccs.at(t)                                          # (M, 2) metres: the contour at 1:250,000
 """
 
-from engine.build import BuiltSet, build_contour_set
-from engine.ccs import CCS, build_ccs
+from engine.ccsm.build import BuiltSet, build_contour_set
+from engine.ccsm.ccs import CCS, build_ccs
+from engine.ccsm.regression import ScaleModel, t_for_scale
+from engine.ccsm.similarity import similarity
 from engine.errors import (
     CCSMError,
     InvalidContour,
@@ -24,12 +26,10 @@ from engine.errors import (
     TileOutOfRange,
     UnknownLayer,
 )
-from engine.io import make_transformer, read_source, sample_contours_path, sample_dem_path, write_geojson
+from engine.geom.douglas_peucker import douglas_peucker
+from engine.io.source import make_transformer, read_source, sample_contours_path, sample_dem_path, write_geojson
 from engine.params import BuildParams
-from engine.regression import ScaleModel, t_for_scale
-from engine.scale import scale_for_zoom, zoom_for_scale
-from engine.similarity import similarity
-from engine.simplify import douglas_peucker
+from engine.tiles.scale import scale_for_zoom, zoom_for_scale
 from engine.types import BadFeature, Contour, ContourSet
 
 __all__ = [

@@ -8,7 +8,7 @@ contour ``Ln`` (the target scale). The CCS is the ruled surface ``S(u, t) = (1 -
 the slice at ``t`` is the cut of the CCS by the horizontal plane at that height (heights are stored as ``t``
 itself, so ``Zmin = 0`` and ``Zmax = 1``). A map zoom ``z`` maps to a scale denominator, the scale to a
 similarity through the regression model, and the similarity to ``t`` through the contour's own Sim(t) table
-(:mod:`engine.regression`).
+(:mod:`engine.ccsm.regression`).
 """
 
 from __future__ import annotations

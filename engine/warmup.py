@@ -15,10 +15,10 @@ import numpy as np
 def warm_up() -> float:
     """Call every compiled kernel on a tiny input; returns the seconds it took."""
     from engine.baselines import ladder, simplify_at_scale
+    from engine.ccsm.similarity import similarity
     from engine.evaluation.levels import ranks_from_levels
-    from engine.rowsig import row_significance
-    from engine.similarity import similarity
-    from engine.simplify import douglas_peucker
+    from engine.geom.douglas_peucker import douglas_peucker
+    from engine.tiles.significance import row_significance
 
     start = time.perf_counter()
     s = np.linspace(0.0, 2 * np.pi, 40, endpoint=False)
@@ -41,11 +41,11 @@ def _render_one_tile(ring: np.ndarray, line: np.ndarray) -> None:
     import tempfile
     from pathlib import Path
 
-    from engine.build import build_contour_set
+    from engine.ccsm.build import build_contour_set
     from engine.params import BuildParams
-    from engine.render import Renderer
-    from engine.store import CCSStore
-    from engine.tiles import Bounds, tiles_covering
+    from engine.serve.renderer import Renderer
+    from engine.store.sqlite import CCSStore
+    from engine.tiles.grid import Bounds, tiles_covering
     from engine.types import Contour, ContourSet
 
     origin = np.array([750_000.0, 4_060_000.0])  # UTM 16N, near the bundled sample

@@ -55,7 +55,7 @@ def check_scale(name: str, value: float) -> float:
 
 def output_crs(crs: str, source_crs: str) -> str:
     """The CRS ``--crs`` names: 4326, 3857, source, or any authority string pyproj knows (checked)."""
-    from engine.crs import parse_crs
+    from engine.io.crs import parse_crs
 
     value = crs.strip()
     if value.lower() == "source":
@@ -129,12 +129,12 @@ def simplify(
 ) -> None:
     """Write every contour of SOURCE as it looks at one map scale."""
     from engine.baselines import simplify_at_scale
-    from engine.build import build_contour_set
+    from engine.ccsm.build import build_contour_set
+    from engine.ccsm.regression import t_for_scale
+    from engine.ccsm.similarity import SimilarityReference
     from engine.evaluation.levels import rotate_ring_to
-    from engine.io import read_source, write_geojson
+    from engine.io.source import read_source, write_geojson
     from engine.params import BuildParams
-    from engine.regression import t_for_scale
-    from engine.similarity import SimilarityReference
 
     method = method.strip().lower()
     if method not in SIMPLIFY_METHODS:
@@ -264,7 +264,7 @@ def evaluate(
     """Compare CCSM with DP, WM and VW as the paper's section 3.2 does; write tables and figures."""
     from engine.evaluation.pipeline import evaluate_set
     from engine.evaluation.report import write_report
-    from engine.io import read_source
+    from engine.io.source import read_source
 
     target = target.strip().lower()
     if target not in ("extreme", "scale"):

@@ -112,13 +112,13 @@ def build(
     from app.service import SAMPLE_ID, SAMPLE_NAME, build_lock
     from app.settings import Settings
     from engine.errors import CCSMError
-    from engine.store import CCSStore, SourceSpec, build_dataset, slugify
+    from engine.store.sqlite import CCSStore, SourceSpec, build_dataset, slugify
 
     console = Console(stderr=True)
     settings = Settings()
     store_path = store or settings.store_path
     if source is None:
-        from engine.io import sample_contours_path
+        from engine.io.source import sample_contours_path
 
         spec = SourceSpec(sample_contours_path(), dataset or SAMPLE_ID, name or SAMPLE_NAME)
     else:

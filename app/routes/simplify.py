@@ -12,7 +12,7 @@ from app.responses import accepts_gzip, body_response, etag_matches, make_etag
 from app.service import DatasetService
 from app.settings import Settings
 from engine.errors import InvalidParameter
-from engine.render import MAX_SCALE, feature_collection
+from engine.serve.renderer import MAX_SCALE, feature_collection
 
 router = APIRouter(tags=["simplify"])
 

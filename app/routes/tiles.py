@@ -13,7 +13,7 @@ from app.dependencies import TileQuery, get_service, get_settings
 from app.responses import accepts_gzip, body_response, etag_matches, make_etag
 from app.service import DatasetService, lonlat_bounds
 from app.settings import Settings
-from engine.scale import zoom_for_scale
+from engine.tiles.scale import zoom_for_scale
 
 router = APIRouter(tags=["tiles"])
 

@@ -15,7 +15,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent.parent))  # run as a script from a checkout, without installing
 
-from engine.io import contours_from_dem, read_source, write_geojson  # noqa: E402
+from engine.io.source import contours_from_dem, read_source, write_geojson  # noqa: E402
 
 DEM = HERE / "jacksboro_fault_dem.npz"
 OUT = HERE / "jacksboro_contours_20m.geojson"

@@ -1,6 +1,6 @@
 """The baseline simplifiers CCSM is compared with, run as in Qian et al. (2021), section 3.2 and Table 1.
 
-- ``"dp"``: Douglas–Peucker (:mod:`engine.baselines.dp`, on top of :mod:`engine.simplify`);
+- ``"dp"``: Douglas–Peucker (:mod:`engine.baselines.dp`, on top of :mod:`engine.geom.douglas_peucker`);
 - ``"wm"``: Wang–Müller bend simplification (:mod:`engine.baselines.wang_muller`);
 - ``"vw"``: Visvalingam–Whyatt effective areas, mapshaper's default (:mod:`engine.baselines.vw`).
 

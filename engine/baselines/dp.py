@@ -1,6 +1,6 @@
 """Douglas–Peucker as the paper's baseline: a 100-level ladder by kept-point count, and a result at a scale.
 
-Both reuse :mod:`engine.simplify` (the same DP that makes CCSM's target contour), so the baseline and CCSM
+Both reuse :mod:`engine.geom.douglas_peucker` (the same DP that makes CCSM's target contour), so the baseline and CCSM
 agree on what DP keeps; nothing here reimplements DP.
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from engine.baselines.common import count_schedule, min_vertices
-from engine.simplify import douglas_peucker, significance
+from engine.geom.douglas_peucker import douglas_peucker, significance
 from engine.tolerances import tolerance_for_scale
 from engine.types import Coords
 
@@ -18,7 +18,7 @@ def dp_ladder(xy: Coords, closed: bool, levels: int) -> list[Coords]:
     """Douglas–Peucker results with a kept-point count falling by a fixed share of ``n`` per level.
 
     Level ``i`` keeps the ``count_schedule(n, floor, levels)[i]`` most significant vertices, with the same
-    ordering and tie-break as :func:`engine.simplify.douglas_peucker_count` (significance descending, then
+    ordering and tie-break as :func:`engine.geom.douglas_peucker.douglas_peucker_count` (significance descending, then
     vertex index), so every level equals ``douglas_peucker_count(xy, count, closed)`` and the levels are
     nested. The significance is computed once for all levels.
 

@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from engine.baselines._wm_kernels import detect_bends, wm_generalize, wm_ladder_removal
-from engine.simplify import douglas_peucker_count
+from engine.geom.douglas_peucker import douglas_peucker_count
 from engine.tolerances import MIN_VISIBLE_RING_SIDE_M
 from engine.types import Coords
 

@@ -24,10 +24,10 @@ from numpy.typing import NDArray
 
 from engine.baselines import ladder as baseline_ladder
 from engine.baselines import simplify_at_scale
-from engine.ccs import CCS, build_ccs
+from engine.ccsm.ccs import CCS, build_ccs
+from engine.ccsm.slicing import slice_rows
 from engine.errors import InvalidParameter
 from engine.params import BuildParams
-from engine.slicing import slice_rows
 from engine.types import Contour, Coords
 
 #: Methods compared, in the order of every table and figure.

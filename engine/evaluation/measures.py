@@ -19,7 +19,7 @@ import shapely
 from numpy.typing import NDArray
 
 from engine.errors import InvalidParameter
-from engine.geometry import closed_path
+from engine.geom.polyline import closed_path
 from engine.types import Coords
 
 #: Largest similarity difference at which two results count as the same scale (paper section 3.2.3:

@@ -1,7 +1,7 @@
 """Run the paper's comparison (section 3.2) on a contour set: ladders, similarity curves, crossings, tables.
 
 The per-contour work (CCS build, three baseline ladders, 4 x ``levels`` similarities) runs in worker
-processes, a chunk of contours per task, one BLAS thread each (as :mod:`engine.build` does). Crossings need
+processes, a chunk of contours per task, one BLAS thread each (as :mod:`engine.ccsm.build` does). Crossings need
 every contour at one level at once, so the workers send back each ladder in its compact form
 (:mod:`engine.evaluation.levels`) and the crossings are counted level by level, again on all workers.
 """
@@ -18,7 +18,8 @@ import numpy as np
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
-from engine.build import default_workers
+from engine.ccsm.build import default_workers
+from engine.ccsm.similarity import SimilarityReference
 from engine.errors import CCSMError, InvalidParameter
 from engine.evaluation.levels import (
     EVAL_METHODS,
@@ -41,7 +42,6 @@ from engine.evaluation.measures import (
     same_scale_groups,
 )
 from engine.params import BuildParams
-from engine.similarity import SimilarityReference
 from engine.types import BadFeature, Contour, ContourSet, FeatureId
 
 #: Called with (stage, done, total).

@@ -16,9 +16,9 @@ import shapely
 from typer.testing import CliRunner
 
 from app.cli import _register_commands, app
-from engine.crs import make_transformer
-from engine.geometry import closed_path
-from engine.io import read_source, sample_contours_path, write_geojson
+from engine.geom.polyline import closed_path
+from engine.io.crs import make_transformer
+from engine.io.source import read_source, sample_contours_path, write_geojson
 from engine.types import ContourSet
 
 _register_commands()

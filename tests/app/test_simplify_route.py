@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from engine.scale import scale_for_zoom
+from engine.tiles.scale import scale_for_zoom
 from tests.app.conftest import LAT0, LON0
 
 

@@ -12,8 +12,8 @@ import time
 import httpx
 import pytest
 
-from engine.io import sample_contours_path
-from engine.store import CCSStore
+from engine.io.source import sample_contours_path
+from engine.store.sqlite import CCSStore
 from tests.app.conftest import REPO, LiveServer
 from tests.app.helpers import check_tile, tile_for
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import shapely
 
-from engine.scale import zoom_for_scale
+from engine.tiles.scale import zoom_for_scale
 from tests.app.conftest import LAT0, LON0
 from tests.app.helpers import check_tile, decode, grid_to_lonlat, lines_of, tile_for
 

@@ -14,7 +14,7 @@ from numpy.testing import assert_array_equal
 from engine.baselines import BASELINE_METHODS, effective_areas, ladder, simplify_at_scale
 from engine.baselines.common import count_schedule
 from engine.errors import InvalidContour, InvalidParameter
-from engine.simplify import douglas_peucker, douglas_peucker_count
+from engine.geom.douglas_peucker import douglas_peucker, douglas_peucker_count
 from engine.tolerances import tolerance_for_scale
 from engine.types import Contour
 

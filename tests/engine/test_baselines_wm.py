@@ -14,8 +14,8 @@ from numpy.testing import assert_array_equal
 from engine.baselines import bend_count, ladder, simplify_at_scale
 from engine.baselines._wm_kernels import bend_measures, detect_bends, turning_angles
 from engine.baselines.wang_muller import DEFAULT_WM_PARAMS, WMParams, reference_size, wm_at_scale
-from engine.io import read_source
-from engine.sample import sample_contours_path
+from engine.io.sample import sample_contours_path
+from engine.io.source import read_source
 from engine.tolerances import tolerance_for_scale
 from engine.types import Contour
 

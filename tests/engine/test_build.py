@@ -1,4 +1,4 @@
-"""Tests of engine.build: building a whole contour set, in one process or several."""
+"""Tests of engine.ccsm.build: building a whole contour set, in one process or several."""
 
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ import shapely
 from numpy.testing import assert_array_equal
 from synthetic_shapes import circle_coords, noisy_ellipse_coords, noisy_line_coords
 
-from engine.build import BuiltSet, build_contour_set, vanish_scale
-from engine.ccs import build_ccs
+from engine.ccsm.build import BuiltSet, build_contour_set, vanish_scale
+from engine.ccsm.ccs import build_ccs
+from engine.ccsm.regression import ScaleModel
 from engine.params import BuildParams
-from engine.regression import ScaleModel
 from engine.types import Contour, ContourSet
 
 PARAMS = BuildParams()

@@ -1,4 +1,4 @@
-"""Tests of engine.ccs: the CCS of one contour, its slices and its Sim(t) table."""
+"""Tests of engine.ccsm.ccs: the CCS of one contour, its slices and its Sim(t) table."""
 
 from __future__ import annotations
 
@@ -7,10 +7,10 @@ import pytest
 import shapely
 from numpy.testing import assert_allclose
 
-from engine.ccs import build_ccs, build_surface, check_contour, slice_area
+from engine.ccsm.ccs import build_ccs, build_surface, check_contour, slice_area
 from engine.errors import InvalidContour
+from engine.geom.douglas_peucker import douglas_peucker
 from engine.params import BuildParams
-from engine.simplify import douglas_peucker
 from engine.types import Contour
 
 DEFAULT = BuildParams()

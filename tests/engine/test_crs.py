@@ -1,4 +1,4 @@
-"""Tests of engine.crs: the working CRS, transformers, and where coordinates are valid."""
+"""Tests of engine.io.crs: the working CRS, transformers, and where coordinates are valid."""
 
 from __future__ import annotations
 
@@ -9,7 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
-from engine.crs import (
+from engine.errors import SourceError
+from engine.io.crs import (
     as_coords,
     choose_working_crs,
     crs_to_string,
@@ -18,7 +19,6 @@ from engine.crs import (
     make_transformer,
     parse_crs,
 )
-from engine.errors import SourceError
 
 JACKSBORO_BOUNDS = (-84.41375, 36.44625, -84.07792, 36.73292)
 

@@ -1,4 +1,4 @@
-"""Tests of engine.geometry: lengths, areas and arc-length resampling, checked against shapely."""
+"""Tests of engine.geom.polyline: lengths, areas and arc-length resampling, checked against shapely."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
 from engine.errors import InvalidParameter
-from engine.geometry import (
+from engine.geom.polyline import (
     closed_path,
     cumulative_length,
     path_length,

@@ -10,10 +10,10 @@ import pytest
 from numpy.testing import assert_allclose
 from synthetic_rasters import write_geotiff
 
-from engine.crs import make_transformer
 from engine.errors import InvalidParameter, SourceError
-from engine.io import contours_from_dem, read_source
-from engine.io_dem import LEVEL_OFFSET, contour_levels, read_dem
+from engine.io.crs import make_transformer
+from engine.io.dem import LEVEL_OFFSET, contour_levels, read_dem
+from engine.io.source import contours_from_dem, read_source
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 

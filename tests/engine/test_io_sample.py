@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from engine.crs import make_transformer
-from engine.io import contours_from_dem, read_source, sample_contours_path, sample_dem_path
+from engine.io.crs import make_transformer
+from engine.io.source import contours_from_dem, read_source, sample_contours_path, sample_dem_path
 from engine.types import ContourSet
 
 #: Counts of the committed file (data/sample/README.md); make_sample.py prints them.

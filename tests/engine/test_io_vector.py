@@ -19,8 +19,8 @@ from numpy.testing import assert_allclose
 from pyogrio.raw import write as ogr_write
 
 from engine.errors import InvalidContour, SourceError
-from engine.io import read_contours, read_source, write_geojson
-from engine.io_vector import ELEVATION_FIELDS, dedup_mask, infer_interval
+from engine.io.source import read_contours, read_source, write_geojson
+from engine.io.vector import ELEVATION_FIELDS, dedup_mask, infer_interval
 from engine.tolerances import Tolerances
 from engine.types import BadFeature, ContourSet
 

@@ -1,4 +1,4 @@
-"""Tests of engine._kernels against plain-Python twins: DP significance and the banded discrete Fréchet."""
+"""Tests of engine.geom.kernels against plain-Python twins: DP significance and the banded discrete Fréchet."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from engine._kernels import discrete_frechet, dp_significance
+from engine.geom.kernels import discrete_frechet, dp_significance
 
 HYPOTHESIS = settings(deadline=None, max_examples=80)
 

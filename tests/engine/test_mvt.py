@@ -4,8 +4,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from engine.mvt import LineFeature, encode_line_tile, encode_tile, encode_tile_reference, varint, varint_array
-from engine.tiles import drop_repeats
+from engine.tiles.grid import drop_repeats
+from engine.tiles.mvt import LineFeature, encode_line_tile, encode_tile, encode_tile_reference, varint, varint_array
 
 
 def decode(b):

@@ -1,4 +1,4 @@
-"""Tests of engine.regression: the exponential model, scale -> t tables and the per-group fit."""
+"""Tests of engine.ccsm.regression: the exponential model, scale -> t tables and the per-group fit."""
 
 from __future__ import annotations
 
@@ -10,8 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
-from engine.params import BuildParams
-from engine.regression import (
+from engine.ccsm.regression import (
     GroupModel,
     ScaleModel,
     assign_groups,
@@ -19,6 +18,7 @@ from engine.regression import (
     fit_scale_model,
     t_for_scale,
 )
+from engine.params import BuildParams
 from engine.types import Contour
 
 HYPOTHESIS = settings(deadline=None, max_examples=60)

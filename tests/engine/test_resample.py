@@ -1,4 +1,4 @@
-"""Tests of engine.resample: correspondence samples of L0 and Ln (paper section 2.1 (2))."""
+"""Tests of engine.ccsm.resample: correspondence samples of L0 and Ln (paper section 2.1 (2))."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
+from engine.ccsm.resample import correspond, densify_path
 from engine.errors import InvalidContour, InvalidParameter
-from engine.geometry import closed_path
-from engine.resample import correspond, densify_path
-from engine.simplify import douglas_peucker
+from engine.geom.douglas_peucker import douglas_peucker
+from engine.geom.polyline import closed_path
 
 HYPOTHESIS = settings(deadline=None, max_examples=50)
 

@@ -1,4 +1,4 @@
-"""Tests of engine.scale: zoom <-> scale denominator at 512 px tiles and the 0.28 mm OGC pixel."""
+"""Tests of engine.tiles.scale: zoom <-> scale denominator at 512 px tiles and the 0.28 mm OGC pixel."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from engine.errors import InvalidParameter
-from engine.scale import scale_for_zoom, zoom_for_scale
+from engine.tiles.scale import scale_for_zoom, zoom_for_scale
 
 HYPOTHESIS = settings(deadline=None, max_examples=80)
 latitudes = st.floats(-85.0, 85.0)

@@ -1,4 +1,4 @@
-"""Tests of engine.similarity: exact discrete Fréchet and the paper's Sim = 1 - dF / Length (eq. 9)."""
+"""Tests of engine.ccsm.similarity: exact discrete Fréchet and the paper's Sim = 1 - dF / Length (eq. 9)."""
 
 from __future__ import annotations
 
@@ -11,18 +11,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.distance import cdist
 
-from engine.errors import InvalidParameter
-from engine.evaluation.levels import eval_params
-from engine.evaluation.pipeline import evaluate_contour
-from engine.io import read_source
-from engine.sample import sample_contours_path
-from engine.similarity import (
+from engine.ccsm.similarity import (
     SimilarityReference,
     discrete_frechet_distance,
     improved_frechet,
     resample_count,
     similarity,
 )
+from engine.errors import InvalidParameter
+from engine.evaluation.levels import eval_params
+from engine.evaluation.pipeline import evaluate_contour
+from engine.io.sample import sample_contours_path
+from engine.io.source import read_source
 from engine.types import Contour
 
 HYPOTHESIS = settings(deadline=None, max_examples=60)

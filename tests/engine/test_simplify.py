@@ -1,4 +1,4 @@
-"""Tests of engine.simplify: Douglas–Peucker for open lines and rings, its significance and count variants."""
+"""Tests of engine.geom.douglas_peucker: Douglas–Peucker for open lines and rings, its significance and count variants."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from numpy.testing import assert_array_equal
 
 from engine.errors import InvalidParameter
-from engine.simplify import douglas_peucker, douglas_peucker_count, ring_anchors, significance
+from engine.geom.douglas_peucker import douglas_peucker, douglas_peucker_count, ring_anchors, significance
 
 HYPOTHESIS = settings(deadline=None, max_examples=60)
 

@@ -1,4 +1,4 @@
-"""Tests of engine.slicing: the ruled closed form against trimesh's plane section of the CCS-mesh."""
+"""Tests of engine.ccsm.slicing: the ruled closed form against trimesh's plane section of the CCS-mesh."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ import shapely
 from numpy.testing import assert_allclose
 from trimesh.intersections import mesh_plane
 
-from engine.ccs import CCS, build_ccs
+from engine.ccsm.ccs import CCS, build_ccs
+from engine.ccsm.slicing import ccs_mesh, check_t, section_with_trimesh, slice_rows
 from engine.errors import InvalidParameter
 from engine.params import BuildParams
-from engine.slicing import ccs_mesh, check_t, section_with_trimesh, slice_rows
 from engine.types import Contour
 
 INSIDE = [0.05, 0.25, 0.5, 0.77, 0.95]

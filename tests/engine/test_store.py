@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from engine.errors import StoreError, UnknownLayer
-from engine.io import read_source
-from engine.store import CCSStore, SourceSpec, build_dataset, source_hash
+from engine.io.source import read_source
+from engine.store.sqlite import CCSStore, SourceSpec, build_dataset, source_hash
 from tests.app.conftest import synthetic_features, write_geojson
 
 
@@ -57,7 +57,7 @@ def test_unchanged_source_is_not_rebuilt_changed_one_is(store, src, tmp_path):
 def test_failed_write_rolls_back(store, src, monkeypatch):
     before = store.dataset("h")
     fids = store.all_fids("h")
-    import engine.store as mod
+    import engine.store.sqlite as mod
 
     calls = {"n": 0}
     real = mod.row_significance
@@ -98,8 +98,8 @@ def test_not_a_store(tmp_path):
 
 
 def test_packed_tiles_equal_contour_by_contour(store):
-    from engine.render import Renderer
-    from engine.tiles import Bounds, tiles_covering
+    from engine.serve.renderer import Renderer
+    from engine.tiles.grid import Bounds, tiles_covering
 
     packed = Renderer(store)
     by_contour = Renderer(store, contour_cache_bytes=1)  # too small for a pack: the LRU path

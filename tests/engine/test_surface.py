@@ -1,4 +1,4 @@
-"""Tests of engine.surface: the CCS fit, with geomdl's global surface interpolation as the oracle."""
+"""Tests of engine.ccsm.surface: the CCS fit, with geomdl's global surface interpolation as the oracle."""
 
 from __future__ import annotations
 
@@ -9,8 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
-from engine.errors import SurfaceFitError
-from engine.surface import (
+from engine.ccsm.surface import (
     WIREFRAME_HEIGHTS,
     averaged_knots,
     averaged_parameters,
@@ -18,6 +17,7 @@ from engine.surface import (
     tessellation_parameters,
     wireframe,
 )
+from engine.errors import SurfaceFitError
 
 ORIGIN = np.array([750_000.0, 4_060_000.0])
 

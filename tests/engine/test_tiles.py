@@ -6,7 +6,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from engine.errors import InvalidParameter, TileOutOfRange
-from engine.tiles import (
+from engine.tiles.grid import (
     HALF_WORLD_M,
     Bounds,
     Tile,

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from engine.build import build_contour_set
+from engine.ccsm.build import build_contour_set
+from engine.ccsm.regression import t_for_scale
+from engine.ccsm.topology import crossing_pairs
 from engine.params import BuildParams
-from engine.regression import t_for_scale
-from engine.topology import crossing_pairs
 from engine.types import Contour, ContourSet
 
 

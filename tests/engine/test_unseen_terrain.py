@@ -19,13 +19,13 @@ import pytest
 import shapely
 from synthetic_rasters import write_geotiff
 
-from engine.build import build_contour_set, t_for_scale_all
+from engine.ccsm.build import build_contour_set, t_for_scale_all
+from engine.ccsm.similarity import similarity
 from engine.evaluation.levels import rotate_ring_to
 from engine.evaluation.pipeline import Evaluation, evaluate_set
-from engine.geometry import closed_path
-from engine.io import read_source
+from engine.geom.polyline import closed_path
+from engine.io.source import read_source
 from engine.params import BuildParams
-from engine.similarity import similarity
 from engine.types import ContourSet
 
 pytestmark = pytest.mark.slow

@@ -23,10 +23,10 @@ from numpy.typing import NDArray
 from scipy.cluster.vq import kmeans2
 from scipy.optimize import OptimizeWarning, curve_fit
 
-from engine.geometry import path_length
+from engine.ccsm.similarity import SimilarityReference
+from engine.geom.douglas_peucker import douglas_peucker
+from engine.geom.polyline import path_length
 from engine.params import BuildParams
-from engine.similarity import SimilarityReference
-from engine.simplify import douglas_peucker
 from engine.tolerances import tolerance_for_scale
 from engine.types import Contour
 

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from engine.types import Coords
 
 if TYPE_CHECKING:
-    from engine.ccs import CCS
+    from engine.ccsm.ccs import CCS
 
 #: Threads for the crossing checks: GEOS releases the GIL, so the scales are checked side by side.
 CHECK_THREADS = 2

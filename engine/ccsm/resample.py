@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from engine.errors import InvalidContour, InvalidParameter
-from engine.geometry import segment_lengths
+from engine.geom.polyline import segment_lengths
 from engine.types import Coords
 
 

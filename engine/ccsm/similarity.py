@@ -15,9 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine._kernels import discrete_frechet
 from engine.errors import InvalidParameter
-from engine.geometry import closed_path, path_length, resample_by_arclength
+from engine.geom.kernels import discrete_frechet
+from engine.geom.polyline import closed_path, path_length, resample_by_arclength
 from engine.types import Coords
 
 DEFAULT_SPACING_M = 10.0

@@ -14,12 +14,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from engine.ccs import CCS, build_ccs, check_contour, slice_area
+from engine.ccsm.ccs import CCS, build_ccs, check_contour, slice_area
+from engine.ccsm.regression import ScaleModel, fit_scale_model
+from engine.ccsm.topology import crossing_pairs, find_new_crossings
 from engine.errors import CCSMError
 from engine.params import BuildParams
-from engine.regression import ScaleModel, fit_scale_model
 from engine.tolerances import MIN_VISIBLE_RING_SIDE_M, min_ring_area_for_scale
-from engine.topology import crossing_pairs, find_new_crossings
 from engine.types import BadFeature, Contour, ContourSet
 
 #: Called with (contours done, contours in total) as the build goes.
@@ -252,6 +252,6 @@ def resolve_crossings(
 
 def t_for_scale_all(built: BuiltSet, scale: float) -> np.ndarray:
     """t of every surface at one scale denominator: (n,) float64."""
-    from engine.regression import t_for_scale
+    from engine.ccsm.regression import t_for_scale
 
     return np.array([t_for_scale(built.model.ladder, s.t_at_scale, scale) for s in built.surfaces])

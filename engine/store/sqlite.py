@@ -36,11 +36,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from engine.build import BuiltSet
-from engine.crs import WEB_MERCATOR, make_transformer
+from engine.ccsm.build import BuiltSet
 from engine.errors import StoreError, UnknownLayer
-from engine.geometry import closed_path
-from engine.rowsig import row_significance
+from engine.geom.polyline import closed_path
+from engine.io.crs import WEB_MERCATOR, make_transformer
+from engine.tiles.significance import row_significance
 from engine.types import BadFeature, Contour, Coords
 
 #: Bumped whenever the layout of the file changes; a store of another format is refused.
@@ -177,7 +177,7 @@ class ContourRecord:
         The Sim(t) table.
     sig, sig_original
         (M,) and (n,) float32 significance of each row of base/top and of the original, EPSG:3857 metres
-        (:mod:`engine.rowsig`): a tile whose grid unit is u skips rows below u / 2.
+        (:mod:`engine.tiles.significance`): a tile whose grid unit is u skips rows below u / 2.
     """
 
     fid: int
@@ -622,7 +622,7 @@ class SourceSpec:
     Attributes
     ----------
     path
-        Contour file or DEM (anything :func:`engine.io.read_source` reads).
+        Contour file or DEM (anything :func:`engine.io.source.read_source` reads).
     dataset
         Dataset id in the store (``[a-z0-9_-]``).
     name
@@ -689,8 +689,8 @@ def build_dataset(
     SourceError, InvalidParameter
         The source cannot be read or the parameters are invalid; the store is left as it was.
     """
-    from engine.build import build_contour_set
-    from engine.io import read_source
+    from engine.ccsm.build import build_contour_set
+    from engine.io.source import read_source
     from engine.params import BuildParams
 
     digest = source_hash(spec.path, spec.params())

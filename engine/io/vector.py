@@ -24,7 +24,8 @@ from pyogrio import list_layers
 from pyogrio.errors import DataLayerError, DataSourceError
 from pyogrio.raw import read as ogr_read
 
-from engine.crs import (
+from engine.errors import InvalidContour, SourceError
+from engine.io.crs import (
     WGS84,
     as_coords,
     choose_working_crs,
@@ -33,7 +34,6 @@ from engine.crs import (
     make_transformer,
     parse_crs,
 )
-from engine.errors import InvalidContour, SourceError
 from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
 from engine.types import BadFeature, Contour, ContourSet, Coords, FeatureId
 
@@ -107,7 +107,7 @@ def read_contours(
     Returns
     -------
     ContourSet
-        Contours in metres of the working CRS (:func:`engine.crs.choose_working_crs`); one contour per
+        Contours in metres of the working CRS (:func:`engine.io.crs.choose_working_crs`); one contour per
         LineString and per MultiLineString part (id ``"{fid}:{part}"``); closed rings without their repeated
         last vertex. Unusable features are listed in ``bad_features`` with a reason.
 
@@ -307,7 +307,7 @@ def assemble_contours(
     """Validate, project and clean line parts into a :class:`ContourSet` (shared by vector and DEM sources).
 
     Per part, in this order: coordinates must be finite and valid for ``source_crs`` (see
-    :func:`engine.crs.lonlat_validity`); all vertices are projected to the working CRS in one call; a part
+    :func:`engine.io.crs.lonlat_validity`); all vertices are projected to the working CRS in one call; a part
     whose ends lie within ``tolerances.duplicate_m`` is a closed ring and loses its repeated last vertex;
     consecutive vertices closer than ``duplicate_m`` are merged (the first is kept); a line needs 2 distinct
     vertices, a ring 3, and a length of at least ``tolerances.zero_length_m``.

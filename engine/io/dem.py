@@ -16,9 +16,9 @@ import rasterio
 from numpy.typing import NDArray
 from rasterio.errors import RasterioError
 
-from engine.crs import WGS84, parse_crs
 from engine.errors import InvalidParameter, SourceError
-from engine.io_vector import LineParts, assemble_contours
+from engine.io.crs import WGS84, parse_crs
+from engine.io.vector import LineParts, assemble_contours
 from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
 from engine.types import BadFeature, ContourSet, FeatureId
 
@@ -86,7 +86,7 @@ def contours_from_dem(
     interval
         Contour interval in the DEM's vertical unit; levels are the multiples of it within the data's range.
     tolerances
-        Cleaning distances in metres (see :func:`engine.io_vector.assemble_contours`).
+        Cleaning distances in metres (see :func:`engine.io.vector.assemble_contours`).
 
     Returns
     -------

@@ -25,15 +25,12 @@ from typing import Any, Generic, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
-from engine.crs import WEB_MERCATOR, make_transformer
+from engine.ccsm.similarity import similarity
 from engine.errors import InvalidParameter
-from engine.geometry import closed_path
-from engine.mvt import LineFeature, encode_line_tile, encode_tile
-from engine.rowsig import row_significance
-from engine.scale import scale_for_zoom
-from engine.similarity import similarity
-from engine.store import CCSStore, ContourRecord, DatasetInfo
-from engine.tiles import (
+from engine.geom.polyline import closed_path
+from engine.io.crs import WEB_MERCATOR, make_transformer
+from engine.store.sqlite import CCSStore, ContourRecord, DatasetInfo
+from engine.tiles.grid import (
     CHUNK_ROWS,
     Bounds,
     Tile,
@@ -54,6 +51,9 @@ from engine.tiles import (
     tile_bounds,
     tile_center_latitude,
 )
+from engine.tiles.mvt import LineFeature, encode_line_tile, encode_tile
+from engine.tiles.scale import scale_for_zoom
+from engine.tiles.significance import row_significance
 from engine.types import METHODS, Coords
 
 #: Largest scale denominator /simplify accepts (1:10 billion is already smaller than a whole-earth map).
@@ -275,7 +275,7 @@ class PackedLines:
     sig
         (M,) or (M, k) float32 significance of each row (columns: alternatives chosen per line).
     chunk_off, chunks
-        (n + 1,) offsets into (C, 4) chunk boxes (:func:`engine.tiles.chunk_bounds` of each line).
+        (n + 1,) offsets into (C, 4) chunk boxes (:func:`engine.tiles.grid.chunk_bounds` of each line).
     """
 
     off: NDArray[np.int64]
@@ -506,7 +506,7 @@ class Renderer:
         tops: list[NDArray[np.float64]] = []
         owner: list[int] = []
         part_t: list[float] = []
-        # Rows whose significance is below half a grid unit cannot move the quantised line (engine.rowsig).
+        # Rows whose significance is below half a grid unit cannot move the quantised line (engine.tiles.significance).
         min_sig = 0.5 * (box.maxx - box.minx) / (self.options.extent + 2 * self.options.buffer_px)
         if method == "ccsm":
             partial = []
@@ -700,7 +700,7 @@ class Renderer:
         row0 = lines.off[c]
         a = row0 + (hc[first] - lines.chunk_off[c]) * CHUNK_ROWS
         b = np.minimum(row0 + (hc[last] - lines.chunk_off[c] + 1) * CHUNK_ROWS + 1, lines.off[c + 1])
-        # Rows whose significance is below half a grid unit cannot move the quantised line (engine.rowsig).
+        # Rows whose significance is below half a grid unit cannot move the quantised line (engine.tiles.significance).
         min_sig = 0.5 * (box.maxx - box.minx) / (opts.extent + 2 * opts.buffer_px)
         lo, hi = -opts.buffer_px, opts.extent + opts.buffer_px
         if method == "ccsm":

@@ -11,14 +11,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from engine.ccsm.resample import correspond
+from engine.ccsm.similarity import SimilarityReference
+from engine.ccsm.slicing import ccs_mesh, check_t, slice_rows
+from engine.ccsm.surface import CCSurface, fit_surface, tessellation_parameters
 from engine.errors import InvalidContour
-from engine.geometry import closed_path, path_length, ring_area
+from engine.geom.douglas_peucker import douglas_peucker, douglas_peucker_count
+from engine.geom.polyline import closed_path, path_length, ring_area
 from engine.params import BuildParams
-from engine.resample import correspond
-from engine.similarity import SimilarityReference
-from engine.simplify import douglas_peucker, douglas_peucker_count
-from engine.slicing import ccs_mesh, check_t, slice_rows
-from engine.surface import CCSurface, fit_surface, tessellation_parameters
 from engine.types import Contour, Coords, FeatureId
 
 #: A piece shorter than this many samples cannot carry a cubic; short contours get a finer spacing.
@@ -78,7 +78,7 @@ class CCS:
         return float(np.interp(check_t(t), self.sim_t, self.sim))
 
     def mesh(self, heights: int | None = None):  # type: ignore[no-untyped-def]
-        """The CCS-mesh as a ``trimesh.Trimesh`` in (x, y, t) (rows in t: see ``engine.slicing.mesh_rows``)."""
+        """The CCS-mesh as a ``trimesh.Trimesh`` in (x, y, t) (rows in t: see ``engine.ccsm.slicing.mesh_rows``)."""
         return ccs_mesh(self.base, self.top, heights)
 
     @property

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from engine._kernels import dp_significance
 from engine.errors import InvalidParameter
+from engine.geom.kernels import dp_significance
 from engine.types import Coords
 
 IndexArray = NDArray[np.intp]

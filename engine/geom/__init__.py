@@ -1,0 +1,1 @@
+"""Polyline helpers shared by every method: lengths, resampling, Douglas–Peucker, compiled kernels."""

@@ -1,0 +1,1 @@
+"""Reading contours and DEMs, coordinate reference systems, writing GeoJSON, the bundled sample."""

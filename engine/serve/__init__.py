@@ -1,0 +1,1 @@
+"""Serving built datasets: records, packs, one renderer per generalization method, caches, dataset builds."""
