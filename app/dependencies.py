@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Annotated, Literal
+from typing import Annotated
 
 from fastapi import Query, Request
 
 from app.service import DatasetService
 from app.settings import Settings
+from engine.types import Method
 
-MethodName = Literal["ccsm", "dp", "wm", "vw", "original"]
+MethodName = Method
 
 
 def get_service(request: Request) -> DatasetService:

@@ -25,8 +25,9 @@ import numpy as np
 from app.errors import DatasetExists, MalformedUpload, public_message
 from app.settings import Settings
 from engine.errors import CCSMError, StoreNotReady, UnknownLayer
+from engine.serve.datasets import SourceSpec, build_and_save, build_dataset, slugify, source_hash
 from engine.serve.renderer import Renderer, TileOptions
-from engine.store.sqlite import CCSStore, DatasetInfo, SourceSpec, build_dataset, slugify, source_hash
+from engine.store.sqlite import CCSStore, DatasetInfo
 from engine.tiles.grid import mercator_to_lonlat
 from engine.tiles.scale import zoom_for_scale
 
@@ -248,26 +249,18 @@ class DatasetService:
         thread.start()
 
     def _build_upload(self, upload: Upload, contour_set: Any) -> None:
-        from engine.ccsm.build import build_contour_set
-        from engine.params import BuildParams
-
         try:
-            started = time.perf_counter()
-            params = BuildParams(
-                source_scale=upload.params["source_scale"], target_scale=upload.params["target_scale"]
-            )
-            built = build_contour_set(contour_set, params, workers=1, progress=self._progress(upload.dataset))
-            if self._building(upload.dataset) is None:  # deleted while building
-                return
-            self.store.save(
+            build_and_save(
+                self.store,
                 upload.dataset,
-                built,
-                contour_set.contours,
+                contour_set,
                 name=upload.name,
                 source="upload",
-                source_hash=upload.digest,
+                digest=upload.digest,
                 params=upload.params,
-                build_seconds=time.perf_counter() - started,
+                workers=1,
+                progress=self._progress(upload.dataset),
+                still_wanted=lambda: self._building(upload.dataset) is not None,  # not deleted meanwhile
             )
             self.store.clear_build_status(upload.dataset)
         except Exception as exc:

@@ -32,10 +32,11 @@ sys.path.insert(0, str(REPO))
 
 from engine.ccsm.build import build_contour_set  # noqa: E402
 from engine.io.source import read_source, sample_contours_path  # noqa: E402
+from engine.serve.datasets import save_built  # noqa: E402
 from engine.serve.renderer import Renderer  # noqa: E402
 from engine.store.sqlite import CCSStore  # noqa: E402
-from engine.tiles.grid import Bounds, tiles_covering  # noqa: E402
-from engine.types import Contour  # noqa: E402
+from engine.tiles.grid import tiles_covering  # noqa: E402
+from engine.types import Bounds, Contour  # noqa: E402
 
 WORK = REPO / "var" / "bench"
 
@@ -50,7 +51,7 @@ def build_stores() -> tuple[Path, Path]:
     t0 = time.perf_counter()
     built = build_contour_set(cs)
     print(f"build of the sample: {time.perf_counter() - t0:.1f} s ({len(built.surfaces)} contours)")
-    CCSStore(one).save("sample", built, cs.contours, name="sample", source="sample", source_hash="1x", params={})
+    save_built(CCSStore(one), "sample", built, cs.contours, name="sample", source="sample", digest="1x", params={})
     surfaces, contours = [], []
     for i in range(4):
         for j in range(4):
@@ -62,7 +63,7 @@ def build_stores() -> tuple[Path, Path]:
             for c in cs.contours:
                 contours.append(Contour(f"{i}{j}:{c.id}", c.elevation, c.coords + off, c.closed))
     big = dataclasses.replace(built, surfaces=surfaces)
-    CCSStore(many).save("sample", big, contours, name="sample16", source="sample", source_hash="16x", params={})
+    save_built(CCSStore(many), "sample", big, contours, name="sample16", source="sample", digest="16x", params={})
     return one, many
 
 

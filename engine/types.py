@@ -14,7 +14,7 @@ similarity through the regression model, and the similarity to ``t`` through the
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal, TypeAlias
+from typing import Literal, NamedTuple, TypeAlias, get_args
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,10 +24,19 @@ Coords: TypeAlias = NDArray[np.float64]
 
 #: Simplification methods every tool of ccsm can compare.
 Method = Literal["ccsm", "dp", "wm", "vw", "original"]
-METHODS: tuple[str, ...] = ("ccsm", "dp", "wm", "vw", "original")
+METHODS: tuple[str, ...] = get_args(Method)
 
 #: Feature ids come from the input file (its id or its index).
 FeatureId: TypeAlias = str | int
+
+
+class Bounds(NamedTuple):
+    """(minx, miny, maxx, maxy) rectangle; units as stated where it is used (EPSG:3857 metres or degrees)."""
+
+    minx: float
+    miny: float
+    maxx: float
+    maxy: float
 
 
 @dataclass(frozen=True)

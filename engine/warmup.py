@@ -43,10 +43,11 @@ def _render_one_tile(ring: np.ndarray, line: np.ndarray) -> None:
 
     from engine.ccsm.build import build_contour_set
     from engine.params import BuildParams
+    from engine.serve.datasets import save_built
     from engine.serve.renderer import Renderer
     from engine.store.sqlite import CCSStore
-    from engine.tiles.grid import Bounds, tiles_covering
-    from engine.types import Contour, ContourSet
+    from engine.tiles.grid import tiles_covering
+    from engine.types import Bounds, Contour, ContourSet
 
     origin = np.array([750_000.0, 4_060_000.0])  # UTM 16N, near the bundled sample
     contours = [Contour(0, 100.0, ring + origin, True), Contour(1, 120.0, line + origin, False)]
@@ -55,7 +56,7 @@ def _render_one_tile(ring: np.ndarray, line: np.ndarray) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         store = CCSStore(Path(tmp) / "warmup.sqlite")
         try:
-            info = store.save("warmup", built, contours, name="warmup", source="warmup", source_hash="0", params={})
+            info = save_built(store, "warmup", built, contours, name="warmup", source="warmup", digest="0", params={})
             z, x, y = tiles_covering(Bounds(*info.bounds_3857), 12)[0]
             renderer = Renderer(store)
             for method in ("ccsm", "original"):

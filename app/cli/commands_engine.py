@@ -6,10 +6,13 @@ never a traceback (app/cli/__init__.py).
 
 from __future__ import annotations
 
+import json
 import math
+import os
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated, Any, NoReturn
 
@@ -25,8 +28,6 @@ from engine.types import BadFeature
 err_console = Console(stderr=True)
 console = Console()
 
-#: Simplification methods of ``ccsm simplify``.
-SIMPLIFY_METHODS = ("ccsm", "dp", "wm", "vw")
 #: Output CRS names of ``--crs``.
 OUTPUT_CRS = {"4326": "EPSG:4326", "3857": "EPSG:3857"}
 
@@ -86,6 +87,12 @@ def _bad_feature_table(bad: list[BadFeature], limit: int | None = None) -> Table
     return table
 
 
+def default_cache_store() -> Path:
+    """Where ``ccsm simplify`` keeps what it builds, so a second scale or method costs seconds."""
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "ccsm" / "sources.ccsm.sqlite"
+
+
 @app.command()
 def simplify(
     source: Annotated[
@@ -101,7 +108,8 @@ def simplify(
     method: Annotated[
         str,
         typer.Option(
-            "--method", help="ccsm, dp (Douglas-Peucker), wm (Wang-Mueller) or vw (Visvalingam-Whyatt)."
+            "--method",
+            help="ccsm, dp (Douglas-Peucker), wm (Wang-Mueller), vw (Visvalingam-Whyatt) or original.",
         ),
     ] = "ccsm",
     source_scale: Annotated[
@@ -126,19 +134,28 @@ def simplify(
     workers: Annotated[
         int | None, typer.Option("--workers", help="Worker processes (default: one per core).")
     ] = None,
+    store: Annotated[
+        Path | None,
+        typer.Option(
+            "--store",
+            help="Store that keeps built sources by content hash [$XDG_CACHE_HOME/ccsm/sources.ccsm.sqlite].",
+        ),
+    ] = None,
 ) -> None:
-    """Write every contour of SOURCE as it looks at one map scale."""
-    from engine.baselines import simplify_at_scale
-    from engine.ccsm.build import build_contour_set
-    from engine.ccsm.regression import t_for_scale
-    from engine.ccsm.similarity import SimilarityReference
-    from engine.evaluation.levels import rotate_ring_to
-    from engine.io.source import read_source, write_geojson
-    from engine.params import BuildParams
+    """Write every contour of SOURCE as it looks at one map scale.
+
+    The source is built once into a store (by the hash of its bytes and the scales); later calls at other
+    scales or with other methods read it from there. The answer is the same as ``GET /simplify``'s.
+    """
+    from engine.checks import check_method
+    from engine.io.crs import parse_crs
+    from engine.serve.datasets import SourceSpec, build_dataset, source_hash
+    from engine.serve.renderer import Renderer
+    from engine.serve.simplify import feature_collection
+    from engine.serve.simplify import simplify as simplify_dataset
+    from engine.store.sqlite import CCSStore
 
     method = method.strip().lower()
-    if method not in SIMPLIFY_METHODS:
-        fail(f"unknown method {method!r}; expected one of {', '.join(SIMPLIFY_METHODS)}")
     scale = check_scale("--scale", scale)
     source_scale = check_scale("--source-scale", source_scale)
     target_scale = check_scale("--target-scale", target_scale)
@@ -146,81 +163,53 @@ def simplify(
         fail(f"--workers must be >= 1, got {workers}")
     started = time.perf_counter()
     with bad_input_exits():
-        params = BuildParams(source_scale=source_scale, target_scale=target_scale)
+        check_method(method)
         if not source.exists():
             fail(f"{source}: file not found")
-        contour_set = read_source(source, elevation_field=elevation_field, interval=interval)
-        to_crs = output_crs(crs, contour_set.source_crs)
-        by_id = {c.id: c for c in contour_set.contours}
-        features: list[tuple[Any, bool, dict[str, Any]]] = []
-        vanished: list[Any] = []
-        bad: list[BadFeature]
-        if method == "ccsm":
-            with _progress() as progress:
-                task = progress.add_task("building surfaces", total=len(contour_set.contours))
-                built = build_contour_set(
-                    contour_set,
-                    params,
-                    workers=workers,
-                    progress=lambda d, t: progress.update(task, completed=d, total=t),
-                )
-            bad = built.bad_features
-            for ccs in built.surfaces:
-                if ccs.vanish_scale <= scale:
-                    vanished.append(ccs.contour_id)
-                    continue
-                t = t_for_scale(built.model.ladder, ccs.t_at_scale, scale)
-                path = ccs.at(t)
-                geom = path[:-1] if ccs.closed else path
-                initial = by_id[ccs.contour_id].coords
-                if ccs.closed:
-                    initial = rotate_ring_to(initial, ccs.base[0])
-                sim = SimilarityReference.of(initial, ccs.closed, params.similarity_spacing_m).similarity(
-                    geom
-                )
-                props = {
-                    "id": ccs.contour_id,
-                    "elevation": ccs.elevation,
-                    "t": t,
-                    "similarity": sim,
-                    "scale": scale,
-                }
-                features.append((geom, ccs.closed, props))
-        else:
-            bad = list(contour_set.bad_features)
-            with _progress() as progress:
-                task = progress.add_task(f"simplifying ({method})", total=len(contour_set.contours))
-                for c in contour_set.contours:
-                    try:
-                        geom = simplify_at_scale(method, c.coords, c.closed, scale)
-                        sim = SimilarityReference.of(
-                            c.coords, c.closed, params.similarity_spacing_m
-                        ).similarity(geom)
-                    except CCSMError as exc:
-                        bad.append(BadFeature(c.id, str(exc)))
-                        continue
-                    finally:
-                        progress.advance(task)
-                    props = {
-                        "id": c.id,
-                        "elevation": c.elevation,
-                        "t": None,
-                        "similarity": sim,
-                        "scale": scale,
-                    }
-                    features.append((geom, c.closed, props))
-        out.parent.mkdir(parents=True, exist_ok=True)
-        write_geojson(out, features, from_crs=contour_set.working_crs, to_crs=to_crs)
-    n_in = len(contour_set.contours) + len(contour_set.bad_features)
+        spec = SourceSpec(
+            path=source.resolve(),
+            dataset="",
+            name=source.stem,
+            elevation_field=elevation_field,
+            interval=interval,
+            source_scale=source_scale,
+            target_scale=target_scale,
+        )
+        spec = replace(spec, dataset="src-" + source_hash(spec.path, spec.params())[:16])
+        cache = CCSStore(store or default_cache_store())
+        with _progress() as progress:
+            task = progress.add_task("building surfaces", total=None)
+            info, _ = build_dataset(
+                cache,
+                spec,
+                workers=workers,
+                progress=lambda d, t: progress.update(task, completed=d, total=t),
+            )
+        to_crs = output_crs(crs, info.source_crs)
+        result = simplify_dataset(Renderer(cache), spec.dataset, scale, method=method)
+        doc = feature_collection(
+            result.contours, scale, method, crs=to_crs, decimals=7 if parse_crs(to_crs).is_geographic else 3
+        )
+        write_json_atomically(out, doc)
+    bad = [BadFeature(b["id"], b["reason"], b.get("where", "")) for b in info.bad_features]
+    n_in = info.n_contours + len(bad)
     if bad:
         err_console.print(_bad_feature_table(bad))
     console.print(
-        f"{out}: {len(features)} contours at 1:{scale:,.0f} ({method}, CRS {to_crs}); "
-        f"{len(vanished)} too small to show at this scale (left out); {len(bad)} bad feature(s); "
+        f"{out}: {len(result.contours)} contours at 1:{scale:,.0f} ({method}, CRS {to_crs}); "
+        f"{result.vanished} too small to show at this scale (left out); {len(bad)} bad feature(s); "
         f"{n_in} input feature(s); {time.perf_counter() - started:.1f} s",
         highlight=False,
         soft_wrap=True,
     )
+
+
+def write_json_atomically(path: Path, doc: dict[str, Any]) -> None:
+    """Write JSON to a temporary file beside ``path`` and rename it: readers never see half a file."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".part")
+    tmp.write_text(json.dumps(doc, separators=(",", ":"), allow_nan=False))
+    tmp.replace(path)
 
 
 @app.command()

@@ -112,7 +112,8 @@ def build(
     from app.service import SAMPLE_ID, SAMPLE_NAME, build_lock
     from app.settings import Settings
     from engine.errors import CCSMError
-    from engine.store.sqlite import CCSStore, SourceSpec, build_dataset, slugify
+    from engine.serve.datasets import SourceSpec, build_dataset, slugify
+    from engine.store.sqlite import CCSStore
 
     console = Console(stderr=True)
     settings = Settings()

@@ -11,8 +11,10 @@ from app.dependencies import MethodName, get_service, get_settings
 from app.responses import accepts_gzip, body_response, etag_matches, make_etag
 from app.service import DatasetService
 from app.settings import Settings
+from engine.checks import MAX_SCALE
 from engine.errors import InvalidParameter
-from engine.serve.renderer import MAX_SCALE, feature_collection
+from engine.serve.simplify import feature_collection
+from engine.serve.simplify import simplify as simplify_dataset
 
 router = APIRouter(tags=["simplify"])
 
@@ -69,8 +71,8 @@ def simplify(
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
-    contours = service.renderer.simplify(ident, scale, bbox_lonlat=box, method=method)
-    doc = feature_collection(contours, scale, method)
+    result = simplify_dataset(service.renderer, ident, scale, bbox_lonlat=box, method=method)
+    doc = feature_collection(result.contours, scale, method)
     doc["dataset"] = ident
     body = json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
     return body_response(request, body, "application/geo+json", headers)

@@ -23,10 +23,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from engine.baselines.common import BASELINE_METHODS, as_contour, check_levels, check_method, check_scale
+from engine.baselines.common import BASELINE_METHODS, as_contour, check_levels, check_method
 from engine.baselines.dp import dp_at_scale, dp_ladder
 from engine.baselines.vw import effective_areas, vw_at_scale, vw_ladder
 from engine.baselines.wang_muller import DEFAULT_WM_PARAMS, WMParams, bend_count, wm_at_scale, wm_ladder
+from engine.checks import check_scale
 from engine.types import Coords
 
 __all__ = [

@@ -6,12 +6,12 @@ given *without* repeating its first vertex (the convention of :class:`engine.typ
 
 from __future__ import annotations
 
-import math
 import numbers
 
 import numpy as np
 from numpy.typing import NDArray
 
+from engine import checks
 from engine.errors import InvalidContour, InvalidParameter
 from engine.types import Coords
 
@@ -26,9 +26,7 @@ def min_vertices(closed: bool) -> int:
 
 def check_method(method: object) -> str:
     """Return ``method`` if it names a baseline, else raise :class:`InvalidParameter` naming it."""
-    if not isinstance(method, str) or method not in BASELINE_METHODS:
-        raise InvalidParameter(f"method must be one of {BASELINE_METHODS}, got {method!r}")
-    return method
+    return checks.check_method(method, BASELINE_METHODS)
 
 
 def check_levels(levels: object) -> int:
@@ -36,16 +34,6 @@ def check_levels(levels: object) -> int:
     if isinstance(levels, bool) or not isinstance(levels, numbers.Integral) or int(levels) < 2:
         raise InvalidParameter(f"levels must be an integer >= 2, got {levels!r}")
     return int(levels)
-
-
-def check_scale(scale: object) -> float:
-    """Return ``scale`` as a float if it is a finite map scale denominator > 0."""
-    if isinstance(scale, bool) or not isinstance(scale, numbers.Real):
-        raise InvalidParameter(f"scale must be a number > 0, got {scale!r}")
-    value = float(scale)
-    if not math.isfinite(value) or value <= 0:
-        raise InvalidParameter(f"scale must be a finite number > 0, got {scale!r}")
-    return value
 
 
 def as_contour(coords: Coords, closed: bool) -> Coords:

@@ -15,6 +15,7 @@ When a fit fails or is not monotone, the plain mapping (t linear in log S) is us
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass
 
@@ -235,3 +236,19 @@ def fit_scale_model(contours: list[Contour], params: BuildParams) -> tuple[Scale
         else:
             groups.append(fit_group_model(members, params))
     return ScaleModel(params.source_scale, params.target_scale, ladder, tuple(groups)), labels
+
+
+def t_at_scales(ladder: NDArray[np.float64], tables: NDArray[np.float64], scale: float) -> NDArray[np.float64]:
+    """Each row of ``tables`` ((n, S) t at the ladder's scales) interpolated at one scale, as ``t_for_scale``.
+
+    The interpolation weights depend on the ladder and the scale only, so they are found once for all rows.
+    """
+    logs = np.log(ladder)
+    x = math.log(scale)
+    if x <= logs[0]:
+        return np.zeros(len(tables))  # at and above the source scale: full detail
+    if x >= logs[-1]:
+        return tables[:, -1].copy()
+    i = int(np.searchsorted(logs, x, side="right")) - 1
+    f = (x - logs[i]) / (logs[i + 1] - logs[i])
+    return tables[:, i] * (1 - f) + tables[:, i + 1] * f

@@ -7,7 +7,7 @@ from pathlib import Path
 from engine.errors import SourceError
 
 #: ``data/sample`` of the repository (the engine package sits next to ``data/``).
-SAMPLE_DIR = Path(__file__).resolve().parent.parent / "data" / "sample"
+SAMPLE_DIR = Path(__file__).resolve().parents[2] / "data" / "sample"
 
 SAMPLE_CONTOURS = "jacksboro_contours_20m.geojson"
 SAMPLE_DEM = "jacksboro_fault_dem.npz"

@@ -1,4 +1,7 @@
-"""The store: precomputed CCS grids, Sim(t) and t(scale) tables and dataset metadata in one SQLite file.
+"""The store: precomputed CCS rows, Sim(t) and t(scale) tables and dataset metadata in one SQLite file.
+
+Persistence only: the rows arrive ready (reprojected, with their significance; :mod:`engine.serve.records`)
+and leave decoded; what they mean is the serving layer's business.
 
 - One file, stdlib ``sqlite3``, WAL mode: several processes read it at once while one writes.
 - Contour extents sit in an R*Tree (EPSG:3857), so a tile looks up only the contours it touches.
@@ -6,20 +9,10 @@
   killed at any moment leaves the previous content as it was; SQLite's journal undoes the partial write.
 - Each dataset records the content hash of its source and build parameters, so a changed source is rebuilt
   and an unchanged one is served at once after a restart.
-
-Coordinates. ``base``/``top`` (the CCS rows) and the original contour are transformed once, at save time,
-from the working CRS (metres, e.g. UTM) to EPSG:3857, and the slice ``(1 - t) base + t top`` is then taken
-in EPSG:3857. Interpolating the two transformed rows instead of transforming the interpolated row differs by
-the projection's non-linearity over one link: a link joins two corresponding points at most a few hundred
-metres apart, and over such a distance UTM -> Web Mercator is affine up to terms of order
-(link / earth radius)² x link, i.e. (500 m / 6,378 km)² x 500 m ≈ 3e-6 m — far below a centimetre, and
-well below the tile grid (2.4 m at z16). The original coordinates in the working CRS are kept too, because
-the baseline simplifiers must run in metres of a conformal projected CRS.
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
@@ -36,12 +29,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from engine.ccsm.build import BuiltSet
 from engine.errors import StoreError, UnknownLayer
-from engine.geom.polyline import closed_path
-from engine.io.crs import WEB_MERCATOR, make_transformer
-from engine.tiles.significance import row_significance
-from engine.types import BadFeature, Contour, Coords
+from engine.types import Coords
 
 #: Bumped whenever the layout of the file changes; a store of another format is refused.
 STORE_FORMAT = 2
@@ -104,22 +93,6 @@ CREATE TABLE IF NOT EXISTS builds(
     updated REAL NOT NULL
 );
 """
-
-
-def source_hash(
-    path: str | os.PathLike[str] | None, params: dict[str, Any], data: bytes | None = None
-) -> str:
-    """SHA-256 of a source's bytes (a file's content or ``data``), its build parameters and the store format."""
-    h = hashlib.sha256()
-    h.update(f"ccsm-store-{STORE_FORMAT}\n".encode())
-    h.update(json.dumps(params, sort_keys=True, default=str).encode())
-    if data is not None:
-        h.update(data)
-    elif path is not None:
-        with open(path, "rb") as fh:
-            for block in iter(lambda: fh.read(1 << 20), b""):
-                h.update(block)
-    return h.hexdigest()
 
 
 @dataclass(frozen=True)
@@ -219,6 +192,51 @@ class BuildStatus:
     updated: float
 
 
+@dataclass(frozen=True)
+class NewContour:
+    """One contour row to write: what :class:`ContourRecord` reads back, plus its R*Tree box.
+
+    ``box`` is (minx, maxx, miny, maxy) in EPSG:3857 of every row the contour can draw; ``n_input`` is the
+    number of input vertices.
+    """
+
+    contour_id: str
+    elevation: float
+    closed: bool
+    group: int
+    vanish_scale: float
+    length_m: float
+    n_input: int
+    base: Coords
+    top: Coords
+    original: Coords
+    original_w: Coords
+    t_at_scale: NDArray[np.float64]
+    sim_t: NDArray[np.float64]
+    sim: NDArray[np.float64]
+    sig: NDArray[np.float32]
+    sig_original: NDArray[np.float32]
+    box: tuple[float, float, float, float]
+
+
+@dataclass(frozen=True)
+class NewDataset:
+    """A dataset's metadata to write beside its contour rows."""
+
+    name: str
+    source: str
+    source_hash: str
+    params: dict[str, Any]
+    build_seconds: float
+    working_crs: str
+    source_crs: str
+    interval: float | None
+    source_scale: float
+    target_scale: float
+    ladder: NDArray[np.float64]
+    bad_features: list[dict[str, Any]]
+
+
 def _blob(a: NDArray[np.float64]) -> bytes:
     return np.ascontiguousarray(a, dtype="<f8").tobytes()
 
@@ -226,6 +244,29 @@ def _blob(a: NDArray[np.float64]) -> bytes:
 def _array(b: bytes, cols: int = 0) -> NDArray[np.float64]:
     a = np.frombuffer(b, dtype="<f8")
     return a.reshape(-1, cols) if cols else a
+
+
+def _contour_row(dataset: str, c: NewContour) -> tuple[Any, ...]:
+    return (
+        dataset,
+        str(c.contour_id),
+        float(c.elevation),
+        int(c.closed),
+        int(c.group),
+        None if math.isinf(c.vanish_scale) else float(c.vanish_scale),
+        float(c.length_m),
+        len(c.base),
+        int(c.n_input),
+        _blob(c.base),
+        _blob(c.top),
+        _blob(c.original),
+        _blob(c.original_w),
+        _blob(c.t_at_scale),
+        _blob(c.sim_t),
+        _blob(c.sim),
+        np.asarray(c.sig, dtype="<f4").tobytes(),
+        np.asarray(c.sig_original, dtype="<f4").tobytes(),
+    )
 
 
 def _pid_alive(pid: int) -> bool:
@@ -371,80 +412,25 @@ class CCSStore:
     def save(
         self,
         dataset: str,
-        built: BuiltSet,
-        contours: Sequence[Contour],
-        *,
-        name: str,
-        source: str,
-        source_hash: str,
-        params: dict[str, Any],
-        build_seconds: float = 0.0,
+        meta: NewDataset,
+        contours: Sequence[NewContour],
         progress: Callable[[int, int], None] | None = None,
     ) -> DatasetInfo:
-        """Write a built dataset, replacing any previous version, in one transaction.
+        """Write a dataset, replacing any previous version, in one transaction.
 
-        ``contours`` are the input contours the set was built from (their working-CRS coordinates are stored
-        for method=original and the baselines).
-
-        The transformation to EPSG:3857 happens before the transaction starts; inside it, the old rows are
-        deleted and the new ones inserted. An exception (or a killed process) before COMMIT leaves the
-        previous version untouched.
+        Inside the transaction the old rows are deleted and the new ones inserted. An exception (or a killed
+        process) before COMMIT leaves the previous version untouched.
         """
-        to_3857 = make_transformer(built.working_crs, WEB_MERCATOR)
-        originals = {(c.id, float(c.elevation), c.n_vertices): c.coords for c in contours}
-        rows: list[tuple[Any, ...]] = []
-        boxes: list[tuple[float, float, float, float]] = []
-        n_vertices = 0
-        for ccs in built.surfaces:
-            both = to_3857(np.concatenate([ccs.base, ccs.top]))
-            m = len(ccs.base)
-            base, top = both[:m], both[m:]
-            key = (ccs.contour_id, float(ccs.elevation), int(ccs.n_input_vertices))
-            if key not in originals:
-                raise StoreError(
-                    f"contour {ccs.contour_id!r}: its input coordinates were not passed to save()"
-                )
-            original_w = np.asarray(originals[key], dtype=np.float64)
-            original = to_3857(closed_path(original_w) if ccs.closed else original_w)
-            if not (np.isfinite(both).all() and np.isfinite(original).all()):
-                continue
-            allxy = np.concatenate([both, original])
-            lo, hi = allxy.min(axis=0), allxy.max(axis=0)
-            boxes.append((float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])))
-            n_vertices += len(original_w)
-            rows.append(
-                (
-                    dataset,
-                    str(ccs.contour_id),
-                    float(ccs.elevation),
-                    int(ccs.closed),
-                    int(ccs.group),
-                    None if math.isinf(ccs.vanish_scale) else float(ccs.vanish_scale),
-                    float(ccs.length_m),
-                    m,
-                    int(ccs.n_input_vertices),
-                    _blob(base),
-                    _blob(top),
-                    _blob(original),
-                    _blob(original_w),
-                    _blob(ccs.t_at_scale),
-                    _blob(ccs.sim_t),
-                    _blob(ccs.sim),
-                    row_significance(base, top).astype("<f4").tobytes(),
-                    row_significance(original).astype("<f4").tobytes(),
-                )
-            )
-        if boxes:
-            arr = np.array(boxes)
+        if contours:
+            boxes = np.array([c.box for c in contours])
             bounds = (
-                float(arr[:, 0].min()),
-                float(arr[:, 2].min()),
-                float(arr[:, 1].max()),
-                float(arr[:, 3].max()),
+                float(boxes[:, 0].min()),
+                float(boxes[:, 2].min()),
+                float(boxes[:, 1].max()),
+                float(boxes[:, 3].max()),
             )
         else:
             bounds = (0.0, 0.0, 0.0, 0.0)
-        bad = [_bad_dict(b) for b in built.bad_features]
         with self._write() as cur:
             self._delete_rows(cur, dataset)
             counter = (
@@ -455,41 +441,38 @@ class CCSStore:
                 "INSERT INTO datasets VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                 (
                     dataset,
-                    name,
-                    source,
-                    source_hash,
-                    json.dumps(params, sort_keys=True, default=str),
+                    meta.name,
+                    meta.source,
+                    meta.source_hash,
+                    json.dumps(meta.params, sort_keys=True, default=str),
                     counter,
                     time.time(),
-                    float(build_seconds),
-                    built.working_crs,
-                    built.source_crs,
-                    None if built.interval is None else float(built.interval),
+                    float(meta.build_seconds),
+                    meta.working_crs,
+                    meta.source_crs,
+                    None if meta.interval is None else float(meta.interval),
                     *bounds,
-                    len(rows),
-                    sum(r[3] for r in rows),
-                    n_vertices,
-                    float(built.model.source_scale),
-                    float(built.model.target_scale),
-                    _blob(np.asarray(built.model.ladder, dtype=np.float64)),
-                    json.dumps(bad),
+                    len(contours),
+                    sum(int(c.closed) for c in contours),
+                    sum(c.n_input for c in contours),
+                    float(meta.source_scale),
+                    float(meta.target_scale),
+                    _blob(np.asarray(meta.ladder, dtype=np.float64)),
+                    json.dumps(meta.bad_features),
                 ),
             )
             step = 256
-            for i in range(0, len(rows), step):
-                chunk = rows[i : i + step]
-                for row, box in zip(chunk, boxes[i : i + step], strict=True):
+            for i in range(0, len(contours), step):
+                for c in contours[i : i + step]:
                     cur.execute(
                         "INSERT INTO contours(dataset, contour_id, elevation, closed, grp, vanish_scale, "
                         "length_m, n_rows, n_input, base, top, original, original_w, t_at_scale, sim_t, sim, sig, "
                         "sig_original) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
-                        row,
+                        _contour_row(dataset, c),
                     )
-                    cur.execute(
-                        "INSERT INTO contour_rtree VALUES (?,?,?,?,?,?)", (cur.lastrowid, *box, dataset)
-                    )
+                    cur.execute("INSERT INTO contour_rtree VALUES (?,?,?,?,?,?)", (cur.lastrowid, *c.box, dataset))
                 if progress:
-                    progress(min(i + step, len(rows)), len(rows))
+                    progress(min(i + step, len(contours)), len(contours))
             cur.execute("DELETE FROM builds WHERE dataset=?", (dataset,))
         return self.dataset(dataset)
 
@@ -528,6 +511,11 @@ class CCSStore:
             r[0]
             for r in self._con().execute("SELECT fid FROM contours WHERE dataset=? ORDER BY fid", (dataset,))
         ]
+
+    def elevations(self, dataset: str) -> NDArray[np.float64]:
+        """The distinct elevations of a dataset's contours."""
+        rows = self._con().execute("SELECT DISTINCT elevation FROM contours WHERE dataset=?", (dataset,))
+        return np.array([r[0] for r in rows], dtype=np.float64)
 
     def load(self, fids: Sequence[int]) -> list[ContourRecord]:
         """Decode contour rows by fid (in the order given; unknown fids are skipped)."""
@@ -609,105 +597,3 @@ class CCSStore:
 
 def _host() -> str:
     return os.uname().nodename if hasattr(os, "uname") else "localhost"
-
-
-def _bad_dict(b: BadFeature) -> dict[str, Any]:
-    return {"id": b.id if isinstance(b.id, int) else str(b.id), "reason": b.reason, "where": b.where}
-
-
-@dataclass(frozen=True)
-class SourceSpec:
-    """A source to build into the store and how to read it.
-
-    Attributes
-    ----------
-    path
-        Contour file or DEM (anything :func:`engine.io.source.read_source` reads).
-    dataset
-        Dataset id in the store (``[a-z0-9_-]``).
-    name
-        Human name.
-    elevation_field, interval
-        Passed to ``read_source`` (a DEM needs ``interval``).
-    source_scale, target_scale
-        Scale denominators of t = 0 and t = 1.
-    """
-
-    path: Path
-    dataset: str
-    name: str
-    elevation_field: str | None = None
-    interval: float | None = None
-    source_scale: float = 50_000.0
-    target_scale: float = 500_000.0
-
-    def params(self) -> dict[str, Any]:
-        """The parameters that decide the build (part of the content hash)."""
-        return {
-            "elevation_field": self.elevation_field,
-            "interval": self.interval,
-            "source_scale": self.source_scale,
-            "target_scale": self.target_scale,
-        }
-
-
-def slugify(text: str) -> str:
-    """A dataset id from a name: lowercase letters, digits, ``_`` and ``-``.
-
-    >>> slugify("Jacksboro Contours 20m.geojson")
-    'jacksboro-contours-20m-geojson'
-    """
-    out = "".join(c if c.isalnum() or c in "_-" else "-" for c in text.lower().strip())
-    while "--" in out:
-        out = out.replace("--", "-")
-    return out.strip("-")[:64] or "dataset"
-
-
-def is_current(store: CCSStore, spec: SourceSpec) -> bool:
-    """True when the store holds ``spec``'s dataset built from the same bytes and parameters."""
-    stored = store.source_hash_of(spec.dataset)
-    return stored is not None and stored == source_hash(spec.path, spec.params())
-
-
-def build_dataset(
-    store: CCSStore,
-    spec: SourceSpec,
-    *,
-    workers: int | None = None,
-    progress: Callable[[int, int], None] | None = None,
-    force: bool = False,
-) -> tuple[DatasetInfo, bool]:
-    """Read, build and store one source unless the store already holds it unchanged.
-
-    Returns
-    -------
-    (info, rebuilt)
-        The stored dataset and whether it was (re)built now.
-
-    Raises
-    ------
-    SourceError, InvalidParameter
-        The source cannot be read or the parameters are invalid; the store is left as it was.
-    """
-    from engine.ccsm.build import build_contour_set
-    from engine.io.source import read_source
-    from engine.params import BuildParams
-
-    digest = source_hash(spec.path, spec.params())
-    if not force and store.source_hash_of(spec.dataset) == digest:
-        return store.dataset(spec.dataset), False
-    started = time.perf_counter()
-    params = BuildParams(source_scale=spec.source_scale, target_scale=spec.target_scale)
-    contour_set = read_source(spec.path, elevation_field=spec.elevation_field, interval=spec.interval)
-    built = build_contour_set(contour_set, params, workers=workers, progress=progress)
-    info = store.save(
-        spec.dataset,
-        built,
-        contour_set.contours,
-        name=spec.name,
-        source=spec.path.name,
-        source_hash=digest,
-        params=spec.params(),
-        build_seconds=time.perf_counter() - started,
-    )
-    return info, True

@@ -3,8 +3,8 @@
 ``encode_tile`` writes the protobuf directly with NumPy: the geometry command streams of every feature are
 built in one pass (deltas, zigzag, varints), and only the small per-feature envelopes are assembled in
 Python. It takes integer tile-grid coordinates (y down) that the caller has already quantised and clipped.
-``encode_tile_reference`` produces the same tile through ``mapbox_vector_tile`` (already-integer coordinates,
-``y_coord_down=True``, DESIGN.md section 3); the tests decode both and compare them, and the benchmark shows
+The tests compare it with a tile written by ``mapbox_vector_tile`` (already-integer coordinates,
+``y_coord_down=True``): both decode the same, and the benchmark shows
 why the direct path is used (the reference spends most of its time building shapely objects per feature).
 """
 
@@ -420,29 +420,3 @@ def encode_tile(layers: Mapping[str, Sequence[LineFeature]], extent: int = DEFAU
     return b"".join(out)
 
 
-def encode_tile_reference(layers: Mapping[str, Sequence[LineFeature]], extent: int = DEFAULT_EXTENT) -> bytes:
-    """The same tile through ``mapbox_vector_tile`` (reference for tests and the benchmark)."""
-    import mapbox_vector_tile
-    import shapely
-
-    payload = []
-    for name, features in layers.items():
-        feats = []
-        for f in features:
-            if not f.parts:
-                continue
-            geom = (
-                shapely.linestrings(f.parts[0])
-                if len(f.parts) == 1
-                else shapely.multilinestrings([shapely.linestrings(p) for p in f.parts])
-            )
-            feats.append({"geometry": geom, "properties": dict(f.properties), "id": int(f.id)})
-        if feats:
-            payload.append({"name": name, "features": feats})
-    if not payload:
-        return b""
-    return bytes(
-        mapbox_vector_tile.encode(
-            payload, default_options={"extents": extent, "y_coord_down": True, "on_invalid_geometry": None}
-        )
-    )

@@ -18,7 +18,8 @@ from fastapi.testclient import TestClient
 
 from app.main import create_app
 from app.settings import Settings
-from engine.store.sqlite import CCSStore, SourceSpec, build_dataset
+from engine.serve.datasets import SourceSpec, build_dataset
+from engine.store.sqlite import CCSStore
 
 REPO = Path(__file__).resolve().parents[2]
 #: Centre of the synthetic hills (near the bundled sample, Jacksboro TN), degrees.

@@ -19,8 +19,9 @@ from numpy.testing import assert_allclose
 from pyogrio.raw import write as ogr_write
 
 from engine.errors import InvalidContour, SourceError
+from engine.intervals import infer_interval
 from engine.io.source import read_contours, read_source, write_geojson
-from engine.io.vector import ELEVATION_FIELDS, dedup_mask, infer_interval
+from engine.io.vector import ELEVATION_FIELDS, dedup_mask
 from engine.tolerances import Tolerances
 from engine.types import BadFeature, ContourSet
 

@@ -3,9 +3,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from reference_mvt import encode_tile_reference
 
 from engine.tiles.grid import drop_repeats
-from engine.tiles.mvt import LineFeature, encode_line_tile, encode_tile, encode_tile_reference, varint, varint_array
+from engine.tiles.mvt import LineFeature, encode_line_tile, encode_tile, varint, varint_array
 
 
 def decode(b):

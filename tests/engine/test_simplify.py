@@ -1,4 +1,4 @@
-"""Tests of engine.geom.douglas_peucker: Douglas–Peucker for open lines and rings, its significance and count variants."""
+"""Tests of engine.geom.douglas_peucker: Douglas–Peucker for lines and rings, significance and count variants."""
 
 from __future__ import annotations
 

@@ -3,7 +3,8 @@ import pytest
 
 from engine.errors import StoreError, UnknownLayer
 from engine.io.source import read_source
-from engine.store.sqlite import CCSStore, SourceSpec, build_dataset, source_hash
+from engine.serve.datasets import SourceSpec, build_dataset, source_hash
+from engine.store.sqlite import CCSStore
 from tests.app.conftest import synthetic_features, write_geojson
 
 
@@ -99,7 +100,8 @@ def test_not_a_store(tmp_path):
 
 def test_packed_tiles_equal_contour_by_contour(store):
     from engine.serve.renderer import Renderer
-    from engine.tiles.grid import Bounds, tiles_covering
+    from engine.tiles.grid import tiles_covering
+    from engine.types import Bounds
 
     packed = Renderer(store)
     by_contour = Renderer(store, contour_cache_bytes=1)  # too small for a pack: the LRU path

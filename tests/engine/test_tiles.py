@@ -4,30 +4,24 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from reference_tiles import clip_lines, clip_to_grid, row_runs
 
 from engine.errors import InvalidParameter, TileOutOfRange
+from engine.tiles.clip import clip_lines_fast
 from engine.tiles.grid import (
     HALF_WORLD_M,
-    Bounds,
     Tile,
     check_fractional_zoom,
     check_tile,
-    chunk_bounds,
-    chunk_bounds_packed,
-    clip_lines,
-    clip_lines_fast,
-    clip_to_grid,
-    collinear_free,
     lonlat_to_mercator,
     mercator_to_lonlat,
     quantize,
-    ranges,
-    row_runs,
-    slice_runs,
     tile_bounds,
     tile_center_latitude,
     tiles_covering,
 )
+from engine.tiles.runs import chunk_bounds, chunk_bounds_packed, collinear_free, ranges, slice_runs
+from engine.types import Bounds
 
 
 def test_tile_bounds_world():

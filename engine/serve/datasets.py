@@ -1,0 +1,200 @@
+"""Building a source into the store: the one build-and-save path of ``ccsm build``, ``ccsm serve`` and uploads.
+
+A dataset records the content hash of its source bytes and build parameters (:func:`source_hash`), so an
+unchanged source is never rebuilt and a changed one always is.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from engine.ccsm.build import BuiltSet, build_contour_set
+from engine.io.source import read_source
+from engine.params import BuildParams
+from engine.serve.records import contour_rows, dataset_meta
+from engine.store.sqlite import STORE_FORMAT, CCSStore, DatasetInfo
+from engine.types import Contour, ContourSet
+
+Progress = Callable[[int, int], None]
+
+
+def source_hash(
+    path: str | os.PathLike[str] | None, params: dict[str, Any], data: bytes | None = None
+) -> str:
+    """SHA-256 of a source's bytes (a file's content or ``data``), its build parameters and the store format."""
+    h = hashlib.sha256()
+    h.update(f"ccsm-store-{STORE_FORMAT}\n".encode())
+    h.update(json.dumps(params, sort_keys=True, default=str).encode())
+    if data is not None:
+        h.update(data)
+    elif path is not None:
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+    return h.hexdigest()
+
+
+@dataclass(frozen=True)
+class SourceSpec:
+    """A source to build into the store and how to read it.
+
+    Attributes
+    ----------
+    path
+        Contour file or DEM (anything :func:`engine.io.source.read_source` reads).
+    dataset
+        Dataset id in the store (``[a-z0-9_-]``).
+    name
+        Human name.
+    elevation_field, interval
+        Passed to ``read_source`` (a DEM needs ``interval``).
+    source_scale, target_scale
+        Scale denominators of t = 0 and t = 1.
+    """
+
+    path: Path
+    dataset: str
+    name: str
+    elevation_field: str | None = None
+    interval: float | None = None
+    source_scale: float = 50_000.0
+    target_scale: float = 500_000.0
+
+    def params(self) -> dict[str, Any]:
+        """The parameters that decide the build (part of the content hash)."""
+        return {
+            "elevation_field": self.elevation_field,
+            "interval": self.interval,
+            "source_scale": self.source_scale,
+            "target_scale": self.target_scale,
+        }
+
+
+def slugify(text: str) -> str:
+    """A dataset id from a name: lowercase letters, digits, ``_`` and ``-``.
+
+    >>> slugify("Jacksboro Contours 20m.geojson")
+    'jacksboro-contours-20m-geojson'
+    """
+    out = "".join(c if c.isalnum() or c in "_-" else "-" for c in text.lower().strip())
+    while "--" in out:
+        out = out.replace("--", "-")
+    return out.strip("-")[:64] or "dataset"
+
+
+def is_current(store: CCSStore, spec: SourceSpec) -> bool:
+    """True when the store holds ``spec``'s dataset built from the same bytes and parameters."""
+    stored = store.source_hash_of(spec.dataset)
+    return stored is not None and stored == source_hash(spec.path, spec.params())
+
+
+def build_and_save(
+    store: CCSStore,
+    dataset: str,
+    contour_set: ContourSet,
+    *,
+    name: str,
+    source: str,
+    digest: str,
+    params: dict[str, Any],
+    workers: int | None = None,
+    progress: Progress | None = None,
+    still_wanted: Callable[[], bool] | None = None,
+) -> DatasetInfo | None:
+    """Build every contour of a read source and write the dataset in one transaction.
+
+    Parameters
+    ----------
+    params
+        The build parameters (``source_scale``, ``target_scale``, ...), stored and part of ``digest``.
+    still_wanted
+        Asked once the build is done and before writing: False (the dataset was deleted meanwhile) skips the
+        write and returns None.
+
+    Raises
+    ------
+    SourceError, InvalidParameter
+        The parameters are invalid; the store is left as it was.
+    """
+    started = time.perf_counter()
+    build_params = BuildParams(source_scale=params["source_scale"], target_scale=params["target_scale"])
+    built = build_contour_set(contour_set, build_params, workers=workers, progress=progress)
+    if still_wanted is not None and not still_wanted():
+        return None
+    return save_built(
+        store,
+        dataset,
+        built,
+        contour_set.contours,
+        name=name,
+        source=source,
+        digest=digest,
+        params=params,
+        build_seconds=time.perf_counter() - started,
+    )
+
+
+def save_built(
+    store: CCSStore,
+    dataset: str,
+    built: BuiltSet,
+    contours: Sequence[Contour],
+    *,
+    name: str,
+    source: str,
+    digest: str,
+    params: dict[str, Any],
+    build_seconds: float = 0.0,
+) -> DatasetInfo:
+    """Write a built set (``contours``: the input contours it was built from) as one dataset version."""
+    meta = dataset_meta(
+        built, name=name, source=source, source_hash=digest, params=params, build_seconds=build_seconds
+    )
+    return store.save(dataset, meta, contour_rows(built, contours))
+
+
+def build_dataset(
+    store: CCSStore,
+    spec: SourceSpec,
+    *,
+    workers: int | None = None,
+    progress: Progress | None = None,
+    force: bool = False,
+) -> tuple[DatasetInfo, bool]:
+    """Read, build and store one source unless the store already holds it unchanged.
+
+    Returns
+    -------
+    (info, rebuilt)
+        The stored dataset and whether it was (re)built now.
+
+    Raises
+    ------
+    SourceError, InvalidParameter
+        The source cannot be read or the parameters are invalid; the store is left as it was.
+    """
+    digest = source_hash(spec.path, spec.params())
+    if not force and store.source_hash_of(spec.dataset) == digest:
+        return store.dataset(spec.dataset), False
+    BuildParams(source_scale=spec.source_scale, target_scale=spec.target_scale)  # bad scales fail before reading
+    contour_set = read_source(spec.path, elevation_field=spec.elevation_field, interval=spec.interval)
+    info = build_and_save(
+        store,
+        spec.dataset,
+        contour_set,
+        name=spec.name,
+        source=spec.path.name,
+        digest=digest,
+        params=spec.params(),
+        workers=workers,
+        progress=progress,
+    )
+    assert info is not None  # no still_wanted callback: always written
+    return info, True

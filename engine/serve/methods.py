@@ -1,0 +1,201 @@
+"""One interface for a generalization method, and its five implementations (ccsm, original, dp, wm, vw).
+
+Tiles, ``/simplify`` and the CLI ask a :class:`Method` the same two questions: which lines to draw in a tile
+(:meth:`Method.tile_lines`, fed to the one tile pipeline of :mod:`engine.serve.renderer`) and what one
+contour looks like at a scale (:meth:`Method.contour_at`).
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from engine.baselines import BASELINE_METHODS, simplify_at_scale
+from engine.ccsm.similarity import similarity
+from engine.geom.polyline import closed_path
+from engine.io.crs import WEB_MERCATOR, make_transformer
+from engine.serve.cache import LRUCache
+from engine.serve.pack import DatasetPack, LineSet
+from engine.store.sqlite import ContourRecord, DatasetInfo
+from engine.types import METHODS, Coords
+
+#: Baseline results are cached per 1/16 of a zoom level of scale: a 4 % step, invisible on screen.
+SCALE_STEPS_PER_OCTAVE = 16
+
+
+class RecordSource(Protocol):
+    """Where a method gets decoded contour rows (the renderer's cache)."""
+
+    def records(self, fids: Sequence[int]) -> list[ContourRecord]:
+        """Decoded rows of these fids, in the order given."""
+        ...
+
+
+@dataclass(frozen=True)
+class TileLines:
+    """What a method draws in a tile, one entry per drawn contour (aligned with the contours asked for).
+
+    Attributes
+    ----------
+    lines
+        The line set to draw from.
+    which
+        (n,) line of ``lines`` of each contour.
+    slice_t
+        (n,) t each line is sliced at (0 for lines that do not morph).
+    column
+        (n,) column of ``lines.sig`` that decides which rows a contour keeps.
+    refill
+        (n,) a line that collapses to one point is drawn again with all its rows (a contour smaller than a
+        grid cell shows as the full line does instead of vanishing).
+    """
+
+    lines: LineSet
+    which: NDArray[np.intp]
+    slice_t: NDArray[np.float64]
+    column: NDArray[np.int64]
+    refill: NDArray[np.bool_]
+
+    @classmethod
+    def unmorphed(cls, lines: LineSet, which: NDArray[np.intp]) -> TileLines:
+        """Lines drawn as stored: t 0, the first significance column, no refill."""
+        n = len(which)
+        return cls(lines, which, np.zeros(n), np.zeros(n, np.int64), np.zeros(n, bool))
+
+
+class Method(ABC):
+    """A generalization method as the tiles, ``/simplify`` and the CLI see it."""
+
+    name: ClassVar[str]
+    #: Whether a hand-pinned t applies (only the continuous method has a t of its own).
+    honours_t: ClassVar[bool] = False
+
+    def visible(self, pack: DatasetPack, idx: NDArray[np.intp], scale: float) -> NDArray[np.intp]:
+        """The contours of ``idx`` drawn at a scale: small rings vanish where the map cannot show them."""
+        return idx[scale < pack.vanish[idx]]
+
+    def is_visible(self, rec: ContourRecord, scale: float) -> bool:
+        """:meth:`visible` for one decoded contour."""
+        return scale < rec.vanish_scale
+
+    @abstractmethod
+    def tile_lines(
+        self, pack: DatasetPack, idx: NDArray[np.intp], ts: NDArray[np.float64], scale: float, ctx: TileContext
+    ) -> TileLines:
+        """The lines of contours ``idx`` (positions in ``pack``) at ``scale``, their t being ``ts``."""
+
+    @abstractmethod
+    def contour_at(self, rec: ContourRecord, t: float, scale: float, info: DatasetInfo) -> tuple[Coords, float]:
+        """One contour at a scale: (EPSG:3857 coordinates, a ring as a closed path; its similarity to the input).
+
+        The similarity is the paper's Sim (1 - improved Fréchet distance / length): for ccsm read from the
+        contour's Sim(t) table (exact at the table's t values, linear between them), for the baselines
+        computed on their result, 1 for the input itself.
+        """
+
+
+@dataclass(frozen=True)
+class TileContext:
+    """What a method may need besides the pack: the dataset's metadata and its decoded rows."""
+
+    info: DatasetInfo
+    source: RecordSource
+
+
+class ContinuousMethod(Method):
+    """CCSM: every contour sliced on its continuous changing surface at its own t."""
+
+    name = "ccsm"
+    honours_t = True
+
+    def tile_lines(
+        self, pack: DatasetPack, idx: NDArray[np.intp], ts: NDArray[np.float64], scale: float, ctx: TileContext
+    ) -> TileLines:
+        """CCS rows; a contour drawn at the target (t = 1) keeps rows by the target's own significance."""
+        at_top = ts >= 1.0
+        return TileLines(pack.ccs, idx, ts, at_top.astype(np.int64), at_top)
+
+    def contour_at(self, rec: ContourRecord, t: float, scale: float, info: DatasetInfo) -> tuple[Coords, float]:
+        """The slice at t; Sim from the contour's table."""
+        return rec.base + t * (rec.top - rec.base), float(np.interp(t, rec.sim_t, rec.sim))
+
+
+class OriginalMethod(Method):
+    """The input contours, unsimplified (every contour at every scale)."""
+
+    name = "original"
+
+    def visible(self, pack: DatasetPack, idx: NDArray[np.intp], scale: float) -> NDArray[np.intp]:
+        """Every contour."""
+        return idx
+
+    def is_visible(self, rec: ContourRecord, scale: float) -> bool:
+        """Every contour."""
+        return True
+
+    def tile_lines(
+        self, pack: DatasetPack, idx: NDArray[np.intp], ts: NDArray[np.float64], scale: float, ctx: TileContext
+    ) -> TileLines:
+        """The input rows."""
+        return TileLines.unmorphed(pack.original, idx)
+
+    def contour_at(self, rec: ContourRecord, t: float, scale: float, info: DatasetInfo) -> tuple[Coords, float]:
+        """The input itself."""
+        return rec.original, 1.0
+
+
+class BaselineMethod(Method):
+    """A per-scale simplifier (Douglas–Peucker, Wang–Müller, Visvalingam–Whyatt) run on the input contour.
+
+    Results are computed in the working CRS (metres), at the scale rounded to 1/16 of a zoom level, and
+    cached per (contour, step).
+    """
+
+    def __init__(self, name: str, cache: LRUCache[tuple[int, str, int], tuple[Coords, Coords]]) -> None:
+        self.name = name  # type: ignore[misc]
+        self.cache = cache
+        self._transformers: dict[str, Callable[[Any], Coords]] = {}
+
+    def line(self, rec: ContourRecord, scale: float, working_crs: str) -> tuple[Coords, Coords]:
+        """(EPSG:3857 closed path, working-CRS coordinates) of the method's result at a scale (cached)."""
+        step = round(math.log2(scale) * SCALE_STEPS_PER_OCTAVE)
+        hit = self.cache.get((rec.fid, self.name, step))
+        if hit is not None:
+            return hit
+        snapped = 2.0 ** (step / SCALE_STEPS_PER_OCTAVE)
+        result_w = np.asarray(simplify_at_scale(self.name, rec.original_w, rec.closed, snapped), dtype=np.float64)
+        tr = self._transformers.get(working_crs)
+        if tr is None:
+            tr = self._transformers[working_crs] = make_transformer(working_crs, WEB_MERCATOR)
+        value = (tr(closed_path(result_w) if rec.closed else result_w), result_w)
+        self.cache.put((rec.fid, self.name, step), value)
+        return value
+
+    def tile_lines(
+        self, pack: DatasetPack, idx: NDArray[np.intp], ts: NDArray[np.float64], scale: float, ctx: TileContext
+    ) -> TileLines:
+        """Each contour's simplified line, taken whole."""
+        recs = ctx.source.records(pack.fid[idx].tolist())
+        lines = [self.line(r, scale, ctx.info.working_crs)[0] for r in recs]
+        return TileLines.unmorphed(LineSet.fixed(lines), np.arange(len(lines)))
+
+    def contour_at(self, rec: ContourRecord, t: float, scale: float, info: DatasetInfo) -> tuple[Coords, float]:
+        """The simplified line; Sim computed on it."""
+        xy, xy_w = self.line(rec, scale, info.working_crs)
+        return xy, float(similarity(rec.original_w, xy_w, rec.closed))
+
+
+def make_methods(baseline_cache_entries: int) -> dict[str, Method]:
+    """One instance of every method, by name (the baselines sharing one bounded result cache)."""
+    cache: LRUCache[tuple[int, str, int], tuple[Coords, Coords]] = LRUCache(baseline_cache_entries)
+    methods: dict[str, Method] = {"ccsm": ContinuousMethod(), "original": OriginalMethod()}
+    for name in BASELINE_METHODS:
+        methods[name] = BaselineMethod(name, cache)
+    assert set(methods) == set(METHODS), "every method name has an implementation"
+    return methods

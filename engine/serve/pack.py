@@ -1,0 +1,143 @@
+"""Contours packed into a few big arrays, so that a tile is a handful of NumPy calls plus one compiled pass.
+
+A :class:`LineSet` is many lines' rows concatenated, with each line's chunk boxes (its own spatial index) and
+row significance; a :class:`DatasetPack` holds a dataset version's contours as two line sets (the CCS rows
+and the input contours) plus their per-contour columns.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from engine.intervals import is_index
+from engine.store.sqlite import ContourRecord
+from engine.tiles.runs import CHUNK_ROWS, chunk_bounds_packed
+from engine.tiles.significance import row_significance
+
+#: Bytes per stored vertex a dataset pack holds, about (to decide whether a dataset fits the contour memory).
+PACK_BYTES_PER_VERTEX = 120
+
+
+@dataclass(frozen=True)
+class LineSet:
+    """The rows of many lines concatenated: line i is rows [off[i], off[i + 1]) of ``base`` and ``top``.
+
+    A line is drawn at t as ``(1 - t) base + t top``; a line that does not morph has ``top is base``.
+
+    Attributes
+    ----------
+    base, top
+        (M, 2) EPSG:3857 rows.
+    off
+        (n + 1,) row offsets.
+    sig
+        (M, k) float32 significance of each row; a tile chooses one column per line.
+    chunk_off, chunks
+        (n + 1,) offsets into (C, 4) (minx, miny, maxx, maxy) boxes of each line's runs of ``chunk_rows`` rows
+        (boxes over both ``base`` and ``top``, so a slice at any t lies inside them).
+    """
+
+    base: NDArray[np.float64]
+    top: NDArray[np.float64]
+    off: NDArray[np.int64]
+    sig: NDArray[np.float32]
+    chunk_off: NDArray[np.int64]
+    chunks: NDArray[np.float64]
+    chunk_rows: int = CHUNK_ROWS
+
+    @classmethod
+    def of(
+        cls,
+        base: NDArray[np.float64],
+        top: NDArray[np.float64],
+        sizes: Sequence[int] | NDArray[np.int64],
+        sig: NDArray[np.float32],
+        chunk_rows: int = CHUNK_ROWS,
+    ) -> LineSet:
+        """Offsets and chunk boxes of concatenated lines."""
+        off = np.concatenate([[0], np.cumsum(np.asarray(sizes, dtype=np.int64))]).astype(np.int64)
+        sig2 = np.ascontiguousarray(sig.reshape(len(base), -1), dtype=np.float32)
+        if len(sizes) == 0:
+            return cls(base, top, off, sig2, np.zeros(1, np.int64), np.zeros((0, 4)), chunk_rows)
+        rows = [base] if top is base else [base, top]
+        chunks, chunk_off = chunk_bounds_packed(rows, off, chunk_rows)
+        return cls(base, top, off, sig2, chunk_off, chunks, chunk_rows)
+
+    @classmethod
+    def fixed(cls, lines: Sequence[NDArray[np.float64]]) -> LineSet:
+        """Lines drawn as they are, every row kept, one chunk per line (a tile takes each line whole)."""
+        sizes = [len(v) for v in lines]
+        base = np.ascontiguousarray(np.concatenate(lines)) if lines else np.zeros((0, 2))
+        keep_all = np.full(len(base), np.inf, dtype=np.float32)
+        return cls.of(base, base, sizes, keep_all, chunk_rows=max([*sizes, 2]))
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held."""
+        arrays = [self.base, self.off, self.sig, self.chunk_off, self.chunks]
+        if self.top is not self.base:
+            arrays.append(self.top)
+        return int(sum(a.nbytes for a in arrays))
+
+
+@dataclass(frozen=True)
+class DatasetPack:
+    """Contours of one dataset version (in fid order) in a few big arrays.
+
+    ``ccs`` holds the CCS rows; its significance has two columns: of the (base, top) rows together (valid at
+    every t) and of ``top`` alone (for contours drawn at t = 1). ``original`` holds the input contours.
+    """
+
+    data_version: int
+    fid: NDArray[np.int64]
+    vanish: NDArray[np.float64]
+    elevation: NDArray[np.float64]
+    index: NDArray[np.bool_]
+    tables: NDArray[np.float64]
+    ccs: LineSet
+    original: LineSet
+
+    @classmethod
+    def of(cls, data_version: int, recs: Sequence[ContourRecord], interval: float | None) -> DatasetPack:
+        """Pack decoded contour rows (in fid order)."""
+        z2 = np.zeros((0, 2))
+        base = np.ascontiguousarray(np.concatenate([r.base for r in recs])) if recs else z2
+        top = np.ascontiguousarray(np.concatenate([r.top for r in recs])) if recs else z2
+        original = np.ascontiguousarray(np.concatenate([r.original for r in recs])) if recs else z2
+        ccs_sig = np.zeros((0, 2), np.float32)
+        orig_sig = np.zeros(0, np.float32)
+        if recs:
+            ccs_sig = np.column_stack(
+                [np.concatenate([r.sig for r in recs]), np.concatenate([row_significance(r.top) for r in recs])]
+            ).astype(np.float32)
+            orig_sig = np.concatenate([r.sig_original for r in recs]).astype(np.float32)
+        elevation = np.array([float(r.elevation) for r in recs])
+        index_of = {e: is_index(e, interval) for e in set(elevation.tolist())}
+        return cls(
+            data_version,
+            np.array([r.fid for r in recs], dtype=np.int64),
+            np.array([r.vanish_scale for r in recs], dtype=np.float64),
+            elevation,
+            np.array([index_of[e] for e in elevation.tolist()], dtype=bool),
+            np.stack([r.t_at_scale for r in recs]) if recs else np.zeros((0, 1)),
+            LineSet.of(base, top, [len(r.base) for r in recs], ccs_sig),
+            LineSet.of(original, original, [len(r.original) for r in recs], orig_sig),
+        )
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held."""
+        arrays = (self.fid, self.vanish, self.elevation, self.index, self.tables)
+        return int(sum(a.nbytes for a in arrays) + self.ccs.nbytes + self.original.nbytes)
+
+    def locate(self, fids: Sequence[int]) -> NDArray[np.intp] | None:
+        """Positions of fids (sorted) in the pack; None when one of them is not in it (another version)."""
+        f = np.asarray(fids, dtype=np.int64)
+        if len(self.fid) == 0:
+            return None if len(f) else np.zeros(0, dtype=np.intp)
+        pos = np.minimum(np.searchsorted(self.fid, f), len(self.fid) - 1)
+        return pos if bool((self.fid[pos] == f).all()) else None

@@ -1,0 +1,131 @@
+"""Every contour of a stored dataset as it looks at one map scale: the engine side of ``/simplify`` and of
+``ccsm simplify``."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from engine.ccsm.regression import t_at_scales
+from engine.checks import check_bbox, check_method, check_scale
+from engine.io.crs import WEB_MERCATOR, make_transformer
+from engine.serve.renderer import T_DECIMALS, Renderer
+from engine.tiles.grid import lonlat_to_mercator, mercator_to_lonlat
+from engine.types import Coords
+
+
+@dataclass(frozen=True)
+class SimplifiedContour:
+    """One contour at a scale, in EPSG:3857 (a ring as a closed path), with its t and similarity."""
+
+    fid: int
+    contour_id: str
+    elevation: float
+    closed: bool
+    t: float
+    similarity: float
+    coords_3857: Coords
+
+
+@dataclass(frozen=True)
+class Simplified:
+    """The answer for a dataset at a scale: the contours drawn, and how many were left out as too small."""
+
+    contours: list[SimplifiedContour]
+    vanished: int
+
+
+def simplify(
+    renderer: Renderer,
+    dataset: str,
+    scale: float,
+    *,
+    bbox_lonlat: Sequence[float] | None = None,
+    method: str = "ccsm",
+) -> Simplified:
+    """Every contour of a dataset at a scale denominator.
+
+    Parameters
+    ----------
+    dataset
+        Stored dataset id.
+    scale
+        Scale denominator, > 0 (any value: t is interpolated in each contour's table).
+    bbox_lonlat
+        (west, south, east, north) degrees: only contours whose extent meets it.
+    method
+        ccsm, dp, wm, vw or original.
+
+    Raises
+    ------
+    InvalidParameter, UnknownLayer
+    """
+    value = check_scale(scale)
+    how = renderer.methods[check_method(method)]
+    bbox = check_bbox(bbox_lonlat) if bbox_lonlat is not None else None
+    info, _ = renderer.info(dataset)
+    if bbox is None:
+        fids = renderer.store.all_fids(dataset)
+    else:
+        xs, ys = lonlat_to_mercator(np.array([bbox.minx, bbox.maxx]), np.array([bbox.miny, bbox.maxy]))
+        fids = renderer.store.query(dataset, (xs[0], ys[0], xs[1], ys[1]))
+    recs = renderer.records(fids)
+    shown = [r for r in recs if how.is_visible(r, value)]
+    if not shown:
+        return Simplified([], len(recs))
+    ts = t_at_scales(info.ladder, np.stack([r.t_at_scale for r in shown]), value)
+    out = []
+    for rec, t in zip(shown, ts.tolist(), strict=True):
+        xy, sim = how.contour_at(rec, t, value, info)
+        out.append(
+            SimplifiedContour(
+                rec.fid, rec.contour_id, float(rec.elevation), rec.closed, round(t, T_DECIMALS), sim, xy
+            )
+        )
+    return Simplified(out, len(recs) - len(shown))
+
+
+def _to_lonlat(xy: Coords) -> Coords:
+    lon, lat = mercator_to_lonlat(xy[:, 0], xy[:, 1])
+    return np.column_stack([lon, lat])
+
+
+def feature_collection(
+    contours: Sequence[SimplifiedContour],
+    scale: float,
+    method: str,
+    *,
+    crs: str = "EPSG:4326",
+    decimals: int = 7,
+) -> dict[str, Any]:
+    """A GeoJSON FeatureCollection of simplified contours (RFC 7946 in EPSG:4326; another CRS is named in a
+    ``crs`` member, as GDAL reads it)."""
+    to_crs = _to_lonlat if crs == "EPSG:4326" else make_transformer(WEB_MERCATOR, crs)
+    doc: dict[str, Any] = {
+        "type": "FeatureCollection",
+        "features": [
+            {
+                "type": "Feature",
+                "id": c.fid,
+                "properties": {
+                    "id": c.contour_id,
+                    "elevation": c.elevation,
+                    "t": c.t,
+                    "similarity": round(c.similarity, 6),
+                    "scale": scale,
+                    "method": method,
+                },
+                "geometry": {
+                    "type": "LineString",
+                    "coordinates": np.round(to_crs(c.coords_3857), decimals).tolist(),
+                },
+            }
+            for c in contours
+        ],
+    }
+    if crs != "EPSG:4326":
+        doc["crs"] = {"type": "name", "properties": {"name": crs}}
+    return doc
