@@ -32,7 +32,7 @@ def _pieces(lines: Sequence[Coords]) -> tuple[NDArray[np.object_], NDArray[np.in
     usable = np.flatnonzero(sizes >= 2)
     if len(usable) == 0:
         return np.empty(0, dtype=object), np.empty(0, dtype=np.intp)
-    coords = np.concatenate([lines[i] for i in usable])
+    coords = np.concatenate([lines[int(i)] for i in usable])
     n = sizes[usable]
     offsets = np.concatenate([[0], np.cumsum(n)[:-1]])
     per_line = (n - 2) // PIECE_SEGMENTS + 1

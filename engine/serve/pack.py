@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -78,7 +79,7 @@ class LineSet:
     @property
     def nbytes(self) -> int:
         """Memory held."""
-        arrays = [self.base, self.off, self.sig, self.chunk_off, self.chunks]
+        arrays: list[NDArray[Any]] = [self.base, self.off, self.sig, self.chunk_off, self.chunks]
         if self.top is not self.base:
             arrays.append(self.top)
         return int(sum(a.nbytes for a in arrays))

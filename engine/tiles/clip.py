@@ -45,7 +45,7 @@ def _close(n, start, j, out_len, out_src, m):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _clip_kernel(q, plen, lo, hi, out, out_len, out_src):  # pragma: no cover - compiled
+def _clip_kernel(q, plen, lo, hi, out, out_len, out_src):  # noqa: C901  # pragma: no cover - compiled, one loop nest
     n = 0
     m = 0
     s = 0

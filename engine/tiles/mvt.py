@@ -314,7 +314,10 @@ def _value_table(
         groups[is_bool][0].append(arr.astype(np.float64))
         groups[is_bool][1].append(np.arange(n, dtype=np.int64) * k + j)  # position in feature order
     vidx = np.empty(n * k, dtype=np.int64)
-    firsts, entries, inverses, positions = [], [], [], []
+    firsts: list[NDArray[np.int64]] = []
+    entries: list[PropertyValue] = []
+    inverses: list[NDArray[np.int64]] = []
+    positions: list[NDArray[np.int64]] = []
     offset = 0
     for is_bool, (vals, pos) in groups.items():
         if not vals:

@@ -46,5 +46,5 @@ def zoom_for_scale(scale: ArrayLike, lat_deg: float) -> NDArray[np.float64]:
     _check_latitude(lat_deg)
     s = np.asarray(scale, dtype=float)
     if np.any(~np.isfinite(s)) or np.any(s <= 0):
-        raise InvalidParameter(f"scale must be a positive finite number, got {scale}")
+        raise InvalidParameter(f"scale must be a positive finite number, got {scale!r}")
     return np.log2(SCALE_AT_Z0 * math.cos(math.radians(lat_deg)) / s)
