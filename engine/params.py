@@ -1,4 +1,4 @@
-"""Frozen parameters of a CCS build, with the defaults the issues and DESIGN.md give."""
+"""Frozen parameters of a CCS build, with the defaults docs/design.md explains."""
 
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ class BuildParams:
         the mesh vertices are the wireframe points themselves, so t = 0 reproduces L0 exactly; more samples
         add the spline's curvature between them, which rounds L0's corners by up to a few metres.
     similarity_levels
-        Number of t values (0..1) at which Sim(t) is computed per contour (DESIGN.md: 10-20 suffice).
+        Number of t values (0..1) at which Sim(t) is computed per contour (docs/design.md section 3).
     similarity_spacing_m
         Resampling spacing of the improved Fréchet distance, metres.
     scale_levels
@@ -50,7 +50,7 @@ class BuildParams:
     resolve_crossings
         With ``target_mode="scale"``: check the slices of all contours for crossings at a ladder of scales
         and rebuild the contours involved with a finer target (half the tolerance, up to four times, then
-        Ln = L0), so that no two contours cross where the input's did not (DESIGN.md section 5).
+        Ln = L0), so that no two contours cross where the input's did not (docs/design.md section 5).
     """
 
     source_scale: float = 50_000.0

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 #: Smallest difference the eye can tell apart on a printed map (cartographic convention), in metres of paper.
 MIN_VISIBLE_DISTANCE_M = 0.0001  # 0.1 mm
 
-#: Smallest side of a closed shape a map can still show, in metres of paper (DESIGN.md section 4).
+#: Smallest side of a closed shape a map can still show, in metres of paper (docs/design.md section 4).
 MIN_VISIBLE_RING_SIDE_M = 0.0005  # 0.5 mm
 
 
@@ -19,7 +19,7 @@ class Tolerances:
     ----------
     duplicate_m
         Consecutive vertices closer than this are one vertex: a DEM with whole-metre heights makes contours
-        with repeated vertices and zero-length pieces (DESIGN.md section 6); 1 mm is far below any map scale.
+        with repeated vertices and zero-length pieces (docs/design.md section 6); 1 mm is far below any map scale.
     zero_length_m
         A contour shorter than this has no shape to simplify.
     """

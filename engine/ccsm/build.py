@@ -61,7 +61,7 @@ class BuiltSet:
 
 
 def vanish_scale(ccs: CCS, model: ScaleModel) -> float:
-    """Smallest scale denominator at which a ring is too small to show (DESIGN.md section 4); inf for lines.
+    """Smallest scale denominator at which a ring is too small to show (docs/design.md section 4); inf for lines.
 
     Below the source scale the ring is L0 and above the target scale it is Ln, so there the answer follows
     from their areas; in between, the ring's slice at each ladder scale is checked.

@@ -1,6 +1,6 @@
 """The CCS of one contour: from the initial contour to a sliceable surface with its Sim(t) table.
 
-Steps (paper section 2, DESIGN.md section 2): Douglas–Peucker target -> correspondence resampling ->
+Steps (paper section 2, docs/design.md section 2): Douglas–Peucker target -> correspondence resampling ->
 degree-3 surface fit -> tessellation into two boundary rows -> similarity table.
 """
 

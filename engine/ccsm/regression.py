@@ -1,4 +1,4 @@
-"""Scale -> t: the paper's similarity-scale regression (section 4.3), with the rules DESIGN.md section 4 adds.
+"""Scale -> t: the paper's similarity-scale regression (section 4.3), with the rules docs/design.md section 4 adds.
 
 1. Contours are grouped by size and shape (k-means on log length and sinuosity).
 2. For a reference contour of each group, the cartographic rule itself gives Sim(S): Douglas–Peucker at

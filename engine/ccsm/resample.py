@@ -4,7 +4,7 @@ Between two consecutive characteristic points, the piece of ``L0`` and the strai
 correspond. Both are sampled with the same number of points, proportional to the piece's arc length, so a
 point on one side always has its partner on the corresponding piece of the other side.
 
-Rule where the paper is silent (DESIGN.md section 3): the samples on ``L0`` keep every vertex of ``L0`` and
+Rule where the paper is silent (docs/design.md section 3): the samples on ``L0`` keep every vertex of ``L0`` and
 add equally spaced points on any edge longer than ``spacing_m``; each sample's partner on ``Ln`` sits at the
 same fraction of arc length along the corresponding segment. Keeping ``L0``'s own vertices is what lets the
 fitted surface pass through ``L0``'s corners instead of cutting them by metres.

@@ -1,4 +1,4 @@
-"""Crossings between different contours (DESIGN.md section 5: contours must never cross at any t).
+"""Crossings between different contours (docs/design.md section 5: contours must never cross at any t).
 
 Lines are cut into short pieces before they go into the spatial index: a 200 km contour has a bounding box
 that overlaps everything, its pieces do not, so the index rejects almost every candidate pair cheaply.

@@ -4,7 +4,7 @@
 - same-scale groups and MAAV (eq. 11, Table 2);
 - linear density (eq. 12, Fig. 11);
 - positional error (eq. 13, Table 3);
-- crossings between different contours at one level (DESIGN.md section 5: they must never cross).
+- crossings between different contours at one level (docs/design.md section 5: they must never cross).
 
 Coordinates are (n, 2) float64 metres; a ring is passed without its repeated first vertex.
 """

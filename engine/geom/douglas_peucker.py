@@ -1,7 +1,7 @@
 """Douglas–Peucker, returning the indices it keeps, for open lines and closed rings.
 
 The characteristic points of CCSM (the target contour ``Ln``) are Douglas–Peucker's kept vertices of ``L0``.
-Rings follow DESIGN.md section 4: DP of a ring never collapses to one point; the ring is split at two far
+Rings follow docs/design.md section 4: DP of a ring never collapses to one point; the ring is split at two far
 apart vertices, both halves are simplified, and at least a triangle remains.
 """
 

@@ -1,6 +1,6 @@
 """Coordinate reference systems: parsing, the metric working CRS, transformers and validity checks.
 
-Simplification happens in metres (DESIGN.md section 4): the data's own CRS when it is projected in metres,
+Simplification happens in metres (docs/design.md section 4): the data's own CRS when it is projected in metres,
 else the UTM zone of the extent's centre. Never degrees.
 """
 

@@ -29,7 +29,7 @@ DEM_SUFFIXES: tuple[str, ...] = RASTER_SUFFIXES + NPZ_SUFFIXES
 
 #: Contours are traced this far (in the DEM's vertical unit, metres in practice) above their nominal level.
 #: DEMs with whole-metre heights put grid nodes exactly on multiples of the interval; tracing there makes
-#: repeated vertices and zero-length pieces (DESIGN.md section 6). A millimetre is far below any DEM's
+#: repeated vertices and zero-length pieces (docs/design.md section 6). A millimetre is far below any DEM's
 #: accuracy.
 LEVEL_OFFSET = 1e-3
 

@@ -1,4 +1,4 @@
-"""Map zoom <-> scale denominator (DESIGN.md section 4).
+"""Map zoom <-> scale denominator (docs/design.md section 4).
 
 MapLibre draws vector tiles at 512 px; the OGC standard pixel is 0.28 mm. At latitude φ one pixel of zoom z
 covers 2π·6378137·cos φ / (512 · 2^z) metres on the ground, so the scale denominator is that divided by

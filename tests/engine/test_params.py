@@ -19,7 +19,7 @@ def test_defaults_span_1_50000_to_1_500000() -> None:
 
 
 def test_target_tolerance_is_0_1_mm_at_the_target_scale() -> None:
-    assert BuildParams().target_tolerance_m == pytest.approx(50.0, rel=1e-12)  # DESIGN.md: 50 m at 1:500,000
+    assert BuildParams().target_tolerance_m == pytest.approx(50.0, rel=1e-12)  # docs/design.md: 50 m at 1:500,000
     assert BuildParams(target_scale=250_000).target_tolerance_m == pytest.approx(25.0, rel=1e-12)
 
 

@@ -17,7 +17,7 @@ latitudes = st.floats(-85.0, 85.0)
 
 
 def expected_scale(zoom: float, lat_deg: float) -> float:
-    """DESIGN.md section 4, written out: ground metres per 512 px tile pixel over 0.28 mm."""
+    """docs/design.md section 4, written out: ground metres per 512 px tile pixel over 0.28 mm."""
     metres_per_pixel = 2.0 * math.pi * 6378137.0 * math.cos(math.radians(lat_deg)) / (512.0 * 2.0**zoom)
     return metres_per_pixel / 0.00028
 

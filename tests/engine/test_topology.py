@@ -1,4 +1,4 @@
-"""Crossings between contours: detection, and the build's repair (DESIGN.md section 5)."""
+"""Crossings between contours: detection, and the build's repair (docs/design.md section 5)."""
 
 import numpy as np
 import pytest
