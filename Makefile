@@ -1,6 +1,6 @@
 # Two commands do all set-up on a fresh machine (see README.md):
 #   make run    install into .venv/, then serve the bundled sample at http://127.0.0.1:8000
-#   make test   install into .venv/, then ruff, the web checks (if any) and the whole test suite
+#   make test   install into .venv/, then ruff, import contracts, mypy, the web checks and the whole test suite
 # Everything Python runs from the project's virtual environment .venv/ (made with $(PYTHON) -m venv), so a
 # system Python that refuses installs (PEP 668, "externally-managed-environment") is never pip-installed into.
 # Missing system tools (python3-venv, node/npm, chromium) are installed with apt-get when run as root on
@@ -65,8 +65,7 @@ run: install
 # Never passes with a tool missing: node and chromium are required (the tests fail rather than skip without
 # them), and pytest's status 5 (no tests collected) fails make like any other non-zero status.
 # Tools are checked first, so a missing one stops make before the long install.
-test: need-node need-chromium install
-	$(BIN)/ruff check engine app tests bench
+test: need-node need-chromium install lint
 	cd web && npm run --if-present test
 	$(BIN)/python -m pytest -q $(PYTEST_ARGS)
 
@@ -77,6 +76,9 @@ bench: install
 evaluate: install
 	$(BIN)/ccsm evaluate data/sample/jacksboro_contours_20m.geojson --out out/evaluation
 
+# ruff (with a complexity limit), the import-linter layering contracts and mypy (pydantic plugin) on engine
+# and app: all part of make test.
 lint: install
 	$(BIN)/ruff check engine app tests bench
-	$(BIN)/mypy engine app
+	$(BIN)/lint-imports
+	$(BIN)/mypy
