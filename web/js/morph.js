@@ -216,7 +216,7 @@ export class MorphingContours {
   _checkPending() {
     const p = this.pending;
     if (!p || !this.map.getSource(p.sourceId)) return;
-    let loaded = false;
+    let loaded;
     try {
       loaded = this.map.isSourceLoaded(p.sourceId);
     } catch {
