@@ -4,6 +4,8 @@ import * as maplibregl from 'maplibre-gl';
 import {getJSON, formatDetail} from './api.js';
 import {installProtocol, onTileActivity} from './protocol.js';
 import {MorphingContours} from './morph.js';
+import {datasetLabel, initialDataset, tilejsonUrl} from './datasets.js';
+import {tooltipText, tReadout, zoomReadout} from './readout.js';
 import {formatScale, quantiseZoom, scaleDenominator} from './scale.js';
 import {installDropZone, uploadDataset} from './upload.js';
 
@@ -239,26 +241,14 @@ function scheduleReadout() {
   }, 150);
 }
 
-function fmtT(t) {
-  return Number(t).toFixed(3);
-}
-
 function updateReadout() {
   if (!mapA) return;
   const zoom = mapA.getZoom();
   const lat = mapA.getCenter().lat;
   $('readout-scale').textContent = formatScale(scaleDenominator(zoom, lat));
   const s = mainLayer?.state();
-  const q = s?.activeQ;
-  $('readout-zoom').textContent = `zoom ${zoom.toFixed(2)}` + (q != null ? ` · morph ${q.toFixed(3)}` : '');
-  let t = 't –';
-  if (state.t != null) t = `t = ${fmtT(state.t)} (pinned)`;
-  else if (state.method === 'original') t = 't = 0 (original)';
-  else if (lastTStats) {
-    t = `t ≈ ${fmtT(lastTStats.median)}`;
-    if (lastTStats.max - lastTStats.min > 0.0005) t += ` (${fmtT(lastTStats.min)}–${fmtT(lastTStats.max)})`;
-  }
-  $('readout-t').textContent = t;
+  $('readout-zoom').textContent = zoomReadout(zoom, s?.activeQ);
+  $('readout-t').textContent = tReadout(state.t, state.method, lastTStats);
 }
 
 function hover(map, e) {
@@ -278,12 +268,7 @@ function hover(map, e) {
   }
   const f = features[0];
   const owner = layers.find((l) => l.visibleLayerIds.includes(f.layer.id));
-  const p = f.properties ?? {};
-  const elev = Number(p.elevation);
-  const elevText = Number.isFinite(elev) ? `${Number.isInteger(elev) ? elev : elev.toFixed(1)} m` : '? m';
-  const tVal = Number(p.t);
-  const tText = Number.isFinite(tVal) ? `t = ${fmtT(tVal)}` : 't –';
-  tip.textContent = `${elevText}${p.index ? ' (index)' : ''} · ${tText} · ${METHOD_NAMES[owner?.method] ?? ''}`;
+  tip.textContent = tooltipText(f.properties, METHOD_NAMES[owner?.method] ?? '');
   tip.style.left = `${e.originalEvent.clientX + 12}px`;
   tip.style.top = `${e.originalEvent.clientY + 12}px`;
   tip.hidden = false;
@@ -291,10 +276,6 @@ function hover(map, e) {
 }
 
 // ---------------------------------------------------------------- datasets
-
-function tilejsonUrl(ds) {
-  return ds.tilejson ?? ds.tilejson_url ?? ds.links?.tilejson ?? `/tiles/${encodeURIComponent(ds.id)}/tilejson.json`;
-}
 
 let datasetList = [];
 let listPoll = null;
@@ -306,10 +287,7 @@ async function refreshDatasets() {
     ...datasetList.map((ds) => {
       const opt = document.createElement('option');
       opt.value = ds.id;
-      let label = ds.name ?? ds.id;
-      if (ds.state === 'building') label += ' (building…)';
-      if (ds.state === 'failed') label += ' (failed)';
-      opt.textContent = label;
+      opt.textContent = datasetLabel(ds);
       opt.disabled = ds.state !== 'ready';
       return opt;
     }),
@@ -325,9 +303,7 @@ async function refreshDatasets() {
 
 function pickInitialDataset() {
   if (state.datasetId) return;
-  const wanted = params.get('dataset');
-  const ds =
-    datasetList.find((d) => d.id === wanted && d.state === 'ready') ?? datasetList.find((d) => d.state === 'ready');
+  const ds = initialDataset(datasetList, params.get('dataset'));
   if (ds) selectDataset(ds.id, {fit: !initialHashHasCamera}).catch(showError);
 }
 
