@@ -72,8 +72,8 @@ def in_tile(parts: list[np.ndarray], margin: float = 0.0) -> shapely.Geometry:
 
 
 def farthest(a: shapely.Geometry, b: shapely.Geometry) -> float:
-    """How far any point of ``a`` lies from ``b`` (the directed Hausdorff distance, sampled every 1/4 unit)."""
-    points = shapely.points(shapely.get_coordinates(shapely.segmentize(a, 0.25)))
+    """How far any point of ``a`` lies from ``b`` (the directed Hausdorff distance, sampled every 2 units)."""
+    points = shapely.points(shapely.get_coordinates(shapely.segmentize(a, 2.0)))
     return float(shapely.distance(points, b).max()) if len(points) else 0.0
 
 
