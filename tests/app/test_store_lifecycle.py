@@ -10,11 +10,11 @@ import sys
 import time
 
 import httpx
+import numpy as np
 import pytest
 
-from engine.io.source import sample_contours_path
 from engine.store.sqlite import CCSStore
-from tests.app.conftest import REPO, LiveServer
+from tests.app.conftest import REPO, LiveServer, synthetic_features, write_geojson
 from tests.app.helpers import check_tile, tile_for
 
 
@@ -51,6 +51,37 @@ def test_sample_builds_on_first_start_and_restart_serves_from_store(tmp_path):
     assert CCSStore(store).dataset("sample").data_version == info["data_version"]
 
 
+#: Run in the killed process: ``ccsm build`` with a page cache small enough that the new rows spill into the WAL
+#: file, and a hook in the store's insert loop that reports the WAL size once KILL_AFTER_ROWS rows are in,
+#: then waits for the kill.
+KILLED_BUILD = """
+import os, signal, sys
+import engine.store.sqlite as sq
+from app.cli import main
+
+after = int(os.environ["KILL_AFTER_ROWS"])
+wal = sq.Path(os.environ["STORE"] + "-wal")
+real_save, real_row = sq.CCSStore.save, sq._contour_row
+seen = {"rows": 0, "wal_before": 0}
+
+def save(self, *a, **k):
+    self._con().execute("PRAGMA cache_size=8")
+    seen["wal_before"] = wal.stat().st_size if wal.exists() else 0
+    return real_save(self, *a, **k)
+
+def row(*a):
+    if seen["rows"] == after:
+        print("inside the write", after, seen["wal_before"], wal.stat().st_size, flush=True)
+        signal.pause()
+    seen["rows"] += 1
+    return real_row(*a)
+
+sq.CCSStore.save, sq._contour_row = save, row
+sys.argv = ["ccsm", *sys.argv[1:]]
+main()
+"""
+
+
 @pytest.mark.slow
 def test_killed_build_leaves_the_store_as_it_was(tmp_path, built_store):
     store = tmp_path / "ccsm.sqlite"
@@ -58,33 +89,28 @@ def test_killed_build_leaves_the_store_as_it_was(tmp_path, built_store):
     store.write_bytes(built_store.read_bytes())
     before = CCSStore(store).dataset("hills")
     fids_before = CCSStore(store).all_fids("hills")
-    # Rebuild dataset 'hills' from another, larger source, and kill -9 the build half way.
+    recs_before = CCSStore(store).load(fids_before)
+    other = write_geojson(tmp_path / "other.geojson", synthetic_features(seed=11))
+    # Rebuild dataset 'hills' from another source and kill -9 the build inside the store's write transaction.
+    cmd = [sys.executable, "-c", KILLED_BUILD, "build", str(other), "--store", str(store), "--id", "hills"]
     proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-c",
-            "from app.cli import main; main()",
-            "build",
-            str(sample_contours_path()),
-            "--store",
-            str(store),
-            "--id",
-            "hills",
-            "--workers",
-            "1",
-        ],
+        [*cmd, "--workers", "1"],
         cwd=REPO,
         stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        env={**os.environ, "COLUMNS": "100"},
+        stderr=(tmp_path / "build.log").open("wb"),
+        env={**os.environ, "STORE": str(store), "KILL_AFTER_ROWS": "20"},
     )
-    assert proc.stdout is not None
-    line = proc.stdout.readline().decode()
-    assert "building hills" in line
-    time.sleep(3.0)
-    assert proc.poll() is None, "the build finished before it could be killed"
-    os.kill(proc.pid, signal.SIGKILL)
-    proc.wait()
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline().decode().split()
+        assert line[:3] == ["inside", "the", "write"], (tmp_path / "build.log").read_text()[-2000:]
+        wal_before, wal_now = int(line[4]), int(line[5])
+        assert wal_now > wal_before  # the deletes and 20 new rows are on disk, uncommitted
+        os.kill(proc.pid, signal.SIGKILL)
+    finally:
+        proc.kill()
+        proc.wait()
+    assert proc.returncode == -signal.SIGKILL
     after = CCSStore(store)
     assert after.integrity_ok()
     info = after.dataset("hills")
@@ -92,7 +118,10 @@ def test_killed_build_leaves_the_store_as_it_was(tmp_path, built_store):
     assert info.source_hash == before.source_hash
     assert info.n_contours == before.n_contours
     assert after.all_fids("hills") == fids_before
-    assert len(after.query("hills", info.bounds_3857)) == len(fids_before)
+    assert after.query("hills", info.bounds_3857) == fids_before
+    for old, new in zip(recs_before, after.load(fids_before), strict=True):
+        assert new.contour_id == old.contour_id and np.array_equal(new.base, old.base)
+        assert np.array_equal(new.top, old.top) and np.array_equal(new.original, old.original)
 
 
 def test_build_command_is_idempotent(tmp_path, synthetic_path):
