@@ -1,12 +1,15 @@
 import gzip
+import math
 
 import numpy as np
+import pyproj
 import pytest
 import shapely
 
+from engine.baselines import simplify_at_scale
 from engine.tiles.scale import zoom_for_scale
 from tests.app.conftest import LAT0, LON0
-from tests.app.helpers import check_tile, decode, grid_to_lonlat, lines_of, tile_for
+from tests.app.helpers import BUFFER, EXTENT, check_tile, decode, grid_to_lonlat, lines_of, tile_for
 
 MVT = "application/vnd.mapbox-vector-tile"
 
@@ -111,6 +114,88 @@ def test_every_method_renders(client, method):
     r = client.get(url(*tile_for(LON0, LAT0, 11), f"method={method}"))
     assert r.status_code == 200
     assert check_tile(r.content)
+
+
+WEB_MERCATOR_HALF = 20037508.342789244
+
+
+def tile_bounds_3857(z, x, y):
+    size = 2 * WEB_MERCATOR_HALF / 2**z
+    return -WEB_MERCATOR_HALF + x * size, WEB_MERCATOR_HALF - (y + 1) * size, size
+
+
+def own_line(method, rec, t, scale, to_3857):
+    """The method's own line of a stored contour (EPSG:3857), computed here from the stored rows."""
+    if method == "ccsm":
+        return (1 - t) * rec.base + t * rec.top
+    if method == "original":
+        return rec.original
+    # The service caches baselines per 1/16 of a zoom level: it runs them at the scale rounded to that step.
+    snapped = 2.0 ** (round(math.log2(scale) * 16) / 16)
+    line = np.asarray(simplify_at_scale(method, rec.original_w, rec.closed, snapped))
+    return to_3857(np.vstack([line, line[:1]]) if rec.closed else line)
+
+
+def feature_points(feature):
+    return np.array([p for line in lines_of(feature["geometry"]) for p in line], dtype=float)
+
+
+@pytest.mark.parametrize("zoom", [11, 12])
+def test_each_method_draws_its_own_simplification(client, zoom):
+    """Each method's tile is that method's own line of every contour, quantised to the tile grid: a router that
+    served one method for another fails here."""
+    z, x, y = tile_for(LON0 + 0.01, LAT0, zoom)
+    minx, miny, size = tile_bounds_3857(z, x, y)
+    k = EXTENT / size
+    store = client.app.state.service.store
+    info = store.dataset("hills")
+    tr = pyproj.Transformer.from_crs(info.working_crs, "EPSG:3857", always_xy=True)
+
+    def to_3857(xy):
+        return np.column_stack(tr.transform(xy[:, 0], xy[:, 1]))
+
+    lat = grid_to_lonlat(z, x, y, EXTENT / 2, EXTENT / 2)[1]
+    scale = 279_541_132.014 * math.cos(math.radians(lat)) / 2**zoom
+    drawn = {}
+    for method in ("ccsm", "dp", "wm", "vw", "original"):
+        r = client.get(url(z, x, y, f"method={method}"))
+        assert r.status_code == 200
+        assert float(r.headers["x-tile-scale"]) == pytest.approx(scale, rel=1e-6)
+        feats = check_tile(r.content)
+        assert len(feats) > 5
+        recs = {rec.fid: rec for rec in store.load([f["id"] for f in feats])}
+        drawn[method] = {}
+        for f in feats:
+            rec = recs[f["id"]]
+            assert f["properties"]["elevation"] == rec.elevation
+            line = own_line(method, rec, f["properties"]["t"], scale, to_3857)
+            expected = np.column_stack([np.rint((line[:, 0] - minx) * k), np.rint((miny + size - line[:, 1]) * k)])
+            got = feature_points(f)
+            drawn[method][f["id"]] = got
+            on_edge = ((got == -BUFFER) | (got == EXTENT + BUFFER)).any(axis=1)
+            vertices = got[~on_edge]  # the others are where clipping cut the line at the buffer's edge
+            # every drawn vertex is a vertex of the method's own line ...
+            gap = np.abs(vertices[:, None, :] - expected[None, :, :]).max(axis=2).min(axis=1)
+            assert gap.max() <= 1, (method, f["id"], gap.max())
+            # ... and every vertex of that line inside the tile lies on the drawn line (rows thinned away by
+            # significance move it by under half a grid unit, rounding by another).
+            inside = expected[((expected >= 0) & (expected <= EXTENT)).all(axis=1)]
+            parts = shapely.MultiLineString([line for line in lines_of(f["geometry"])])
+            if len(inside):
+                far = shapely.distance(parts, shapely.points(inside)).max()
+                assert far <= 1.5, (method, f["id"], far)
+            if method in ("dp", "wm", "vw"):  # baselines keep every row: exactly the line's vertices
+                in_buffer = expected[((expected > -BUFFER) & (expected < EXTENT + BUFFER)).all(axis=1)]
+                assert {tuple(p) for p in vertices} == {tuple(p) for p in in_buffer}, (method, f["id"])
+    # The methods differ in this tile, so the five tiles differ.
+    names = list(drawn)
+    for i, a in enumerate(names):
+        for b in names[i + 1 :]:
+            common = set(drawn[a]) & set(drawn[b])
+            assert any(
+                drawn[a][fid].shape != drawn[b][fid].shape or (drawn[a][fid] != drawn[b][fid]).any()
+                for fid in common
+            ), (a, b)
 
 
 def test_small_contours_vanish(client):
