@@ -208,16 +208,18 @@ def test_small_contours_vanish(client):
 
 
 def test_feature_ids_stable_across_zooms(client):
-    a = {
+    parent = {
         f["id"]: f["properties"]["elevation"]
         for f in check_tile(client.get(url(*tile_for(LON0, LAT0, 12))).content)
     }
-    b = {
+    child = {
         f["id"]: f["properties"]["elevation"]
         for f in check_tile(client.get(url(*tile_for(LON0, LAT0, 13))).content)
     }
-    for fid in set(a) & set(b):
-        assert a[fid] == b[fid]
+    # The z13 tile lies inside the z12 one: the contours it shows are the parent's, under the same ids.
+    shared = set(parent) & set(child)
+    assert len(child) > 5 and len(shared) >= 0.8 * len(child), (sorted(parent), sorted(child))
+    assert all(parent[fid] == child[fid] for fid in shared)
 
 
 def test_tilejson(client):
