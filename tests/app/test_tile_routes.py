@@ -7,8 +7,10 @@ import pytest
 import shapely
 
 from engine.baselines import simplify_at_scale
+from engine.serve.datasets import SourceSpec, build_dataset
+from engine.store.sqlite import CCSStore
 from engine.tiles.scale import zoom_for_scale
-from tests.app.conftest import LAT0, LON0
+from tests.app.conftest import LAT0, LON0, synthetic_features, write_geojson
 from tests.app.helpers import BUFFER, EXTENT, check_tile, decode, grid_to_lonlat, lines_of, tile_for
 
 MVT = "application/vnd.mapbox-vector-tile"
@@ -51,6 +53,24 @@ def test_etag_304(client):
     assert again.headers["etag"] == r.headers["etag"]
     other = client.get(path + "?zoom=12.5", headers={"if-none-match": r.headers["etag"]})
     assert other.status_code == 200
+
+
+def test_etag_changes_with_the_data_version(client, tmp_path):
+    path = url(*tile_for(LON0, LAT0, 12))
+    old = client.get(path)
+    version = client.get("/tiles/hills/tilejson.json").json()["data_version"]
+    # Rebuild 'hills' from changed contours, through another handle on the store (as `ccsm build` would).
+    changed = write_geojson(tmp_path / "hills.geojson", synthetic_features(seed=8))
+    store = CCSStore(client.app.state.service.store.path)
+    info, rebuilt = build_dataset(store, SourceSpec(changed, "hills", "hills"), workers=1)
+    assert rebuilt and info.data_version > version
+    tj = client.get("/tiles/hills/tilejson.json").json()
+    assert tj["data_version"] == info.data_version and f"v={info.data_version}" in tj["tiles"][0]
+    new = client.get(path, headers={"if-none-match": old.headers["etag"]})
+    assert new.status_code == 200, "a stale ETag must not get a 304"
+    assert new.headers["etag"] != old.headers["etag"]
+    assert new.content != old.content and check_tile(new.content)
+    assert client.get(path, headers={"if-none-match": new.headers["etag"]}).status_code == 304
 
 
 def test_cors_on_get(client):
