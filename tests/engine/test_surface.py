@@ -118,7 +118,7 @@ def test_surface_passes_through_every_data_point_at_its_parameter(closed: bool) 
     fitted = fit_surface(initial, target, closed=closed)
     grid = wireframe(initial, target)
     for row, h in enumerate(WIREFRAME_HEIGHTS):
-        assert_allclose(fitted.evaluate(fitted.params, h), grid[row], rtol=0, atol=1e-6)
+        assert_allclose(fitted.evaluate(fitted.params, h), grid[row], rtol=0, atol=SURFACE_ATOL)
 
 
 def test_ring_surface_is_closed_and_c2_at_the_seam() -> None:
@@ -180,7 +180,7 @@ def test_geomdl_boundary_curves_are_the_surface_at_heights_0_and_1() -> None:
     surface = fit_surface(initial, target, closed=False)
     base, top = surface.curves_to_geomdl()
     u = np.linspace(0.0, 1.0, 41)
-    assert_allclose(np.array(base.evaluate_list(list(u))), surface.evaluate(u, 0.0)[:, :2], atol=1e-6)
-    assert_allclose(np.array(top.evaluate_list(list(u))), surface.evaluate(u, 1.0)[:, :2], atol=1e-6)
+    assert_allclose(np.array(base.evaluate_list(list(u))), surface.evaluate(u, 0.0)[:, :2], atol=SURFACE_ATOL)
+    assert_allclose(np.array(top.evaluate_list(list(u))), surface.evaluate(u, 1.0)[:, :2], atol=SURFACE_ATOL)
     # and the curves pass through their data points (global interpolation)
-    assert_allclose(np.array(base.evaluate_list(list(surface.params))), initial, atol=1e-6)
+    assert_allclose(np.array(base.evaluate_list(list(surface.params))), initial, atol=SURFACE_ATOL)
