@@ -104,9 +104,7 @@ def export(
     ] = 500_000.0,
     elevation_field: Annotated[
         str | None,
-        typer.Option(
-            "--elevation-field", help="Elevation attribute of a contour file (found by name if omitted)."
-        ),
+        typer.Option("--elevation-field", help="Elevation attribute of a contour file (found by name if omitted)."),
     ] = None,
     interval: Annotated[
         float | None,
