@@ -147,10 +147,14 @@ def export(
             )
             spec = replace(spec, dataset="src-" + source_hash(spec.path, spec.params())[:16])
             store_path = store or default_cache_store()
+            try:
+                cache = CCSStore(store_path)
+            except OSError as exc:
+                fail(f"cannot open the store {store_path}: {exc.strerror or exc}")
             with _progress() as progress:
                 task = progress.add_task("building surfaces", total=None)
                 build_dataset(
-                    CCSStore(store_path),
+                    cache,
                     spec,
                     workers=workers,
                     progress=lambda d, t: progress.update(task, completed=d, total=t),

@@ -195,6 +195,7 @@ def test_export_pmtiles_read_with_the_js_reader(hills_pmtiles: Path, hills_expec
         (["hills", "--store", "{store}", "-o", "{tmp}/adir.pmtiles"], "is a directory"),
         (["hills", "--store", "{store}", "-o", "{tmp}/x.pmtiles", "--workers", "0"], "--workers must be >= 1"),
         (["{src}", "--store", "{tmp}/c.sqlite", "-o", "{tmp}/x.pmtiles", "--source-scale", "0"], "--source-scale"),
+        (["{src}", "--store", "{tmp}/afile/c.sqlite", "-o", "{tmp}/x.pmtiles"], "cannot open the store"),
         (["--store", "{store}", "-o", "{tmp}/x.pmtiles"], "give a contour file or DEM"),
         (["{src}", "--dataset", "hills", "--store", "{store}", "-o", "{tmp}/x.pmtiles"], "not both"),
     ],
