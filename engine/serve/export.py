@@ -18,13 +18,13 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
 from engine.ccsm.build import default_workers
 from engine.errors import InvalidParameter
-from engine.serve.renderer import Renderer, TileOptions
+from engine.serve.renderer import MORPH_END_LAYER, MORPH_START_LAYER, MORPH_T_SAMPLES, Renderer, TileOptions
 from engine.store.sqlite import CCSStore, DatasetInfo
 from engine.tiles.archives import ArchiveMeta, archive_format, open_archive, tile_id
 from engine.tiles.grid import Tile, mercator_to_lonlat, tiles_covering
@@ -32,8 +32,6 @@ from engine.tiles.scale import zoom_for_scale
 from engine.types import Bounds
 
 Progress = Callable[[int, int], None]
-#: Which tiles to export: the morph tiles (the format of the archive's metadata) or the per-level tiles.
-TileKind = Literal["morph", "level"]
 
 #: zlib level of the tiles (6: zlib's default, as tile servers and tippecanoe use).
 GZIP_LEVEL = 6
@@ -41,7 +39,12 @@ GZIP_LEVEL = 6
 BATCHES_PER_WORKER = 4
 
 #: The ``ccsm_morph`` member of the TileJSON (docs/morph-tiles.md).
-CCSM_MORPH = {"version": 1, "t_samples": 8, "start_layer": "contours", "end_layer": "contours_end"}
+CCSM_MORPH = {
+    "version": 1,
+    "t_samples": MORPH_T_SAMPLES,
+    "start_layer": MORPH_START_LAYER,
+    "end_layer": MORPH_END_LAYER,
+}
 ATTRIBUTION = "Contours: ccsm"
 DESCRIPTION = "Terrain contours generalized continuously with the zoom (CCSM, Qian et al. 2021): morph tiles."
 
@@ -98,19 +101,19 @@ def morph_vector_layers(minzoom: int, maxzoom: int, interval: float | None) -> l
         "elevation": "Number: height of the contour",
         "index": f"Boolean: true on every 5th interval ({5 * interval:g})" if interval else "Boolean",
         "t": "Number: generalization parameter at the tile's zoom z (0 = source detail, 1 = the target)",
-        **{f"t{k}": f"Number: t at zoom z + {k}/8" for k in range(1, 9)},
+        **{f"t{k}": f"Number: t at zoom z + {k}/{MORPH_T_SAMPLES}" for k in range(1, MORPH_T_SAMPLES + 1)},
         "min_zoom": "Number: draw the contour only where zoom > min_zoom (absent: the whole level)",
     }
     return [
         {
-            "id": "contours",
+            "id": MORPH_START_LAYER,
             "description": "Contours as at the tile's zoom z; each feature id is stable across zooms.",
             "minzoom": minzoom,
             "maxzoom": maxzoom,
             "fields": fields,
         },
         {
-            "id": "contours_end",
+            "id": MORPH_END_LAYER,
             "description": "The same contours (same ids, parts and points) as at zoom z + 1.",
             "minzoom": minzoom,
             "maxzoom": maxzoom,
@@ -152,11 +155,11 @@ def archive_meta(info: DatasetInfo, interval: float | None, minzoom: int, maxzoo
 Rendered = list[tuple[int, int, int, bytes]]
 
 
-def render_batch(renderer: Renderer, dataset: str, tiles: Sequence[Tile], kind: TileKind = "morph") -> Rendered:
-    """The non-empty tiles of a batch, gzip-compressed, in the batch's order."""
+def render_batch(renderer: Renderer, dataset: str, tiles: Sequence[Tile]) -> Rendered:
+    """The non-empty morph tiles of a batch, gzip-compressed, in the batch's order."""
     out: Rendered = []
     for z, x, y in tiles:
-        result = renderer.morph_tile(dataset, z, x, y) if kind == "morph" else renderer.tile(dataset, z, x, y)
+        result = renderer.morph_tile(dataset, z, x, y)
         if result.data is not None:
             out.append((z, x, y, gzip.compress(result.data, compresslevel=GZIP_LEVEL, mtime=0)))
     return out
@@ -165,15 +168,14 @@ def render_batch(renderer: Renderer, dataset: str, tiles: Sequence[Tile], kind: 
 _worker: dict[str, Any] = {}
 
 
-def _init_worker(store_path: str, dataset: str, kind: TileKind) -> None:
+def _init_worker(store_path: str, dataset: str) -> None:
     """Each worker process: its own read-only store connection and renderer."""
     _worker["renderer"] = Renderer(CCSStore(store_path, readonly=True))
     _worker["dataset"] = dataset
-    _worker["kind"] = kind
 
 
 def _render_in_worker(tiles: list[Tile]) -> Rendered:
-    return render_batch(_worker["renderer"], _worker["dataset"], tiles, _worker["kind"])
+    return render_batch(_worker["renderer"], _worker["dataset"], tiles)
 
 
 def _batches(tiles: list[Tile], size: int) -> list[list[Tile]]:
@@ -206,7 +208,6 @@ def export_dataset(
     workers: int | None = None,
     batch_size: int | None = None,
     progress: Progress | None = None,
-    kind: TileKind = "morph",
 ) -> ExportResult:
     """Write the morph tiles of a stored dataset over its bounds, zooms ``minzoom`` .. ``maxzoom``, to ``out``.
 
@@ -222,8 +223,6 @@ def export_dataset(
         Tiles per task (None: about 16 tasks per worker, at most 64 tiles each).
     progress
         Called with (tiles done, tiles in the pyramid).
-    kind
-        ``morph`` (the format the archive's metadata describes) or ``level`` (per-level tiles; for tests).
 
     Raises
     ------
@@ -249,11 +248,11 @@ def export_dataset(
         progress(0, len(tiles))
     try:
         if workers == 1:
-            results: Iterator[Rendered] = (render_batch(renderer, dataset, b, kind) for b in batches)
+            results: Iterator[Rendered] = (render_batch(renderer, dataset, b) for b in batches)
             pool = None
         else:
             pool = ProcessPoolExecutor(
-                max_workers=workers, initializer=_init_worker, initargs=(str(store_path), dataset, kind)
+                max_workers=workers, initializer=_init_worker, initargs=(str(store_path), dataset)
             )
             results = _ordered(pool, batches, BATCHES_PER_WORKER * workers)
         try:
