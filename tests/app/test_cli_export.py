@@ -20,9 +20,10 @@ from typer.testing import CliRunner
 import engine.serve.export as export_mod
 from app.cli import _register_commands, app
 from engine.errors import InvalidParameter
-from engine.serve.export import pyramid
 from engine.serve.renderer import Renderer
 from engine.store.sqlite import CCSStore
+from engine.tiles.grid import tiles_covering
+from engine.types import Bounds
 
 _register_commands()
 runner = CliRunner()
@@ -47,10 +48,11 @@ def morph_tiles(store: Path, dataset: str, minzoom: int, maxzoom: int) -> dict[t
     renderer = Renderer(CCSStore(store, readonly=True))
     info, _ = renderer.info(dataset)
     out = {}
-    for t in pyramid(info.bounds_3857, minzoom, maxzoom):
-        data = renderer.morph_tile(dataset, *t).data
-        if data is not None:
-            out[tuple(t)] = data
+    for z in range(minzoom, maxzoom + 1):  # the grid's own tiles, not the exporter's pyramid
+        for t in tiles_covering(Bounds(*info.bounds_3857), z):
+            data = renderer.morph_tile(dataset, *t).data
+            if data is not None:
+                out[tuple(t)] = data
     return out
 
 
