@@ -236,3 +236,24 @@ def test_bad_target_and_dataset(store: Path, tmp_path: Path) -> None:
     with pytest.raises(InvalidParameter, match="cannot write"):
         export_dataset(store, DATASET, tmp_path / "file" / "x.mbtiles")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
+
+
+def test_header_states_the_exported_zoom_range_when_its_ends_are_empty(
+    store: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Tiles exist only at z3..z12 here (the others rendered empty): the header, like the MBTiles metadata, still
+    # states the range exported, not just the zooms that happen to hold tiles.
+    real = export_mod.render_batch
+
+    def middle_only(renderer, dataset, tiles):  # type: ignore[no-untyped-def]
+        return [t for t in real(renderer, dataset, tiles) if 3 <= t[0] <= 12]
+
+    monkeypatch.setattr(export_mod, "render_batch", middle_only)
+    out = tmp_path / "middle.pmtiles"
+    export_dataset(store, DATASET, out, minzoom=1, maxzoom=14, workers=1)
+    with open(out, "rb") as f:
+        source = MmapSource(f)
+        header = Reader(source).header()
+        zooms = {zxy[0] for zxy, _ in all_tiles(source)}
+    assert zooms == set(range(3, 13))
+    assert (header["min_zoom"], header["max_zoom"]) == (1, 14)
