@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from engine.ccsm.build import default_workers
-from engine.errors import InvalidParameter
+from engine.errors import InvalidParameter, StoreError
 from engine.serve.renderer import MORPH_END_LAYER, MORPH_START_LAYER, MORPH_T_SAMPLES, Renderer, TileOptions
 from engine.store.sqlite import CCSStore, DatasetInfo
 from engine.tiles.archives import ArchiveMeta, archive_format, open_archive, tile_id
@@ -165,17 +165,32 @@ def render_batch(renderer: Renderer, dataset: str, tiles: Sequence[Tile]) -> Ren
     return out
 
 
+def _render_version(renderer: Renderer, dataset: str, version: int, tiles: Sequence[Tile]) -> Rendered:
+    """``render_batch``, provided the dataset is still the version the export started with.
+
+    Raises
+    ------
+    StoreError
+        The dataset was rebuilt or deleted during the export (its tiles would mix two versions).
+    """
+    now = renderer.store.data_version(dataset)
+    if now != version:
+        raise StoreError(f"dataset {dataset} changed during the export (data_version {version} -> {now}); run it again")
+    return render_batch(renderer, dataset, tiles)
+
+
 _worker: dict[str, Any] = {}
 
 
-def _init_worker(store_path: str, dataset: str) -> None:
+def _init_worker(store_path: str, dataset: str, version: int) -> None:
     """Each worker process: its own read-only store connection and renderer."""
     _worker["renderer"] = Renderer(CCSStore(store_path, readonly=True))
     _worker["dataset"] = dataset
+    _worker["version"] = version
 
 
 def _render_in_worker(tiles: list[Tile]) -> Rendered:
-    return render_batch(_worker["renderer"], _worker["dataset"], tiles)
+    return _render_version(_worker["renderer"], _worker["dataset"], _worker["version"], tiles)
 
 
 def _batches(tiles: list[Tile], size: int) -> list[list[Tile]]:
@@ -229,7 +244,7 @@ def export_dataset(
     InvalidParameter
         Bad zoom range, unknown extension, unwritable target or no tile to write (``out`` left as it was).
     UnknownLayer, StoreError
-        The dataset is not in the store, or the store cannot be opened.
+        The dataset is not in the store, the store cannot be opened, or the dataset changed during the export.
     """
     started = time.perf_counter()
     fmt = archive_format(out)
@@ -248,11 +263,12 @@ def export_dataset(
         progress(0, len(tiles))
     try:
         if workers == 1:
-            results: Iterator[Rendered] = (render_batch(renderer, dataset, b) for b in batches)
+            version = info.data_version
+            results: Iterator[Rendered] = (_render_version(renderer, dataset, version, b) for b in batches)
             pool = None
         else:
             pool = ProcessPoolExecutor(
-                max_workers=workers, initializer=_init_worker, initargs=(str(store_path), dataset)
+                max_workers=workers, initializer=_init_worker, initargs=(str(store_path), dataset, info.data_version)
             )
             results = _ordered(pool, batches, BATCHES_PER_WORKER * workers)
         try:

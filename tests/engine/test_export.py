@@ -14,7 +14,7 @@ from pmtiles.reader import MmapSource, Reader, all_tiles
 from pmtiles.tile import Compression, TileType, zxy_to_tileid
 
 import engine.serve.export as export_mod
-from engine.errors import InvalidParameter, UnknownLayer
+from engine.errors import InvalidParameter, StoreError, UnknownLayer
 from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.export import check_zoom_range, export_dataset, pyramid
 from engine.serve.renderer import Renderer
@@ -257,3 +257,23 @@ def test_header_states_the_exported_zoom_range_when_its_ends_are_empty(
         zooms = {zxy[0] for zxy, _ in all_tiles(source)}
     assert zooms == set(range(3, 13))
     assert (header["min_zoom"], header["max_zoom"]) == (1, 14)
+
+
+def test_a_dataset_rebuilt_during_the_export_fails_it(
+    store: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    copy = tmp_path / "copy.sqlite"
+    CCSStore(store)._con().execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    copy.write_bytes(store.read_bytes())
+    real = export_mod.render_batch
+
+    def rebuild_after_first(*args, **kwargs):  # type: ignore[no-untyped-def]
+        with sqlite3.connect(copy) as con:  # what a concurrent `ccsm build --force` does to the row
+            con.execute("UPDATE datasets SET data_version = data_version + 1 WHERE id = ?", (DATASET,))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(export_mod, "render_batch", rebuild_after_first)
+    out = tmp_path / "x.pmtiles"
+    with pytest.raises(StoreError, match="changed during the export"):
+        export_dataset(copy, DATASET, out, workers=1, batch_size=4)
+    assert not out.exists()
