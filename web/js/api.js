@@ -30,7 +30,7 @@ export function formatDetail(detail) {
 }
 
 async function errorFromResponse(response, what) {
-  let body = null;
+  let body;
   let text = '';
   try {
     text = await response.text();

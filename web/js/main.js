@@ -4,6 +4,8 @@ import * as maplibregl from 'maplibre-gl';
 import {getJSON, formatDetail} from './api.js';
 import {installProtocol, onTileActivity} from './protocol.js';
 import {MorphingContours} from './morph.js';
+import {datasetLabel, initialDataset, tilejsonUrl} from './datasets.js';
+import {tooltipText, tReadout, zoomReadout} from './readout.js';
 import {formatScale, quantiseZoom, scaleDenominator} from './scale.js';
 import {installDropZone, uploadDataset} from './upload.js';
 
@@ -22,16 +24,29 @@ const params = new URLSearchParams(window.location.search);
 // Captured before MapLibre writes the camera into the hash: a shared link keeps its view.
 const initialHashHasCamera = /(^#|&)map=/.test(window.location.hash);
 
-const state = {
-  datasetId: null,
-  dataset: null,
-  tilejson: null,
-  method: params.get('method') ?? 'ccsm',
-  compare: params.get('compare') ?? 'dp',
-  view: params.get('view') ?? 'single',
-  t: params.has('t') ? Number(params.get('t')) : null,
+// Everything on this page that changes after it loads, in one place.
+const app = {
+  // What is chosen (window.ccsm.state).
+  state: {
+    datasetId: null,
+    dataset: null,
+    tilejson: null,
+    method: params.get('method') ?? 'ccsm',
+    compare: params.get('compare') ?? 'dp',
+    view: params.get('view') ?? 'single',
+    t: params.has('t') ? Number(params.get('t')) : null,
+  },
+  errors: [], // every error text shown (window.ccsm.errors)
+  maps: {a: null, b: null}, // b: the split view's second map, made when first needed
+  layers: {main: null, overlay: null, split: null},
+  syncing: false, // true while one split map moves the other
+  readoutQueued: false,
+  tStatsTimer: null,
+  lastTStats: null,
+  datasetList: [],
+  listPoll: null,
 };
-const errors = [];
+const {state} = app;
 
 // ---------------------------------------------------------------- messages
 
@@ -47,7 +62,7 @@ function showMessage(text, kind = 'error', {timeoutMs = 0} = {}) {
   close.onclick = () => box.remove();
   box.append(p, close);
   $('messages').append(box);
-  if (kind === 'error') errors.push(text);
+  if (kind === 'error') app.errors.push(text);
   if (timeoutMs) setTimeout(() => box.remove(), timeoutMs);
   return box;
 }
@@ -100,13 +115,6 @@ function createMap(container) {
 
 // ---------------------------------------------------------------- maps and layers
 
-let mapA;
-let mapB = null;
-let mainLayer;
-let overlayLayer;
-let splitLayer = null;
-let syncing = false;
-
 function whenStyleLoaded(map) {
   return map.isStyleLoaded() ? Promise.resolve() : new Promise((resolve) => map.once('load', resolve));
 }
@@ -116,23 +124,24 @@ function layerCallbacks() {
 }
 
 function ensureMapB() {
-  if (mapB) return mapB;
-  mapB = createMap('map-b');
-  splitLayer = new MorphingContours(mapB, {color: COLOR_MAIN, beforeId: 'anchor-main', ...layerCallbacks()});
-  wireMap(mapB);
+  const {maps} = app;
+  if (maps.b) return maps.b;
+  maps.b = createMap('map-b');
+  app.layers.split = new MorphingContours(maps.b, {color: COLOR_MAIN, beforeId: 'anchor-main', ...layerCallbacks()});
+  wireMap(maps.b);
   const sync = (from, to) => () => {
-    if (syncing || !to) return;
-    syncing = true;
+    if (app.syncing || !to) return;
+    app.syncing = true;
     to.jumpTo({center: from.getCenter(), zoom: from.getZoom(), bearing: from.getBearing(), pitch: from.getPitch()});
-    syncing = false;
+    app.syncing = false;
   };
-  mapA.on('move', sync(mapA, mapB));
-  mapB.on('move', sync(mapB, mapA));
-  mapB.on('load', () => {
-    mapB.jumpTo({center: mapA.getCenter(), zoom: mapA.getZoom()});
+  maps.a.on('move', sync(maps.a, maps.b));
+  maps.b.on('move', sync(maps.b, maps.a));
+  maps.b.on('load', () => {
+    maps.b.jumpTo({center: maps.a.getCenter(), zoom: maps.a.getZoom()});
     applyView();
   });
-  return mapB;
+  return maps.b;
 }
 
 function wireMap(map) {
@@ -165,33 +174,34 @@ function setExtent(map, bounds) {
 /** Apply view, methods and t to every layer set. */
 function applyView() {
   const tj = state.tilejson;
-  const maps = $('maps');
-  maps.classList.remove('single', 'split', 'overlay');
-  maps.classList.add(state.view);
+  const {maps, layers} = app;
+  const panes = $('maps');
+  panes.classList.remove('single', 'split', 'overlay');
+  panes.classList.add(state.view);
   $('compare-field').classList.toggle('hidden-field', state.view === 'single');
   $('label-a').textContent = METHOD_NAMES[state.method];
   $('label-b').textContent = METHOD_NAMES[state.compare];
 
-  mainLayer.setOptions({method: state.method, t: state.t});
-  if (mainLayer.tilejson !== tj) mainLayer.setDataset(tj);
+  layers.main.setOptions({method: state.method, t: state.t});
+  if (layers.main.tilejson !== tj) layers.main.setDataset(tj);
 
   const overlayOn = state.view === 'overlay' && tj;
-  overlayLayer.setOptions({method: state.compare, t: state.t});
-  if (overlayLayer.tilejson !== (overlayOn ? tj : null)) overlayLayer.setDataset(overlayOn ? tj : null);
+  layers.overlay.setOptions({method: state.compare, t: state.t});
+  if (layers.overlay.tilejson !== (overlayOn ? tj : null)) layers.overlay.setDataset(overlayOn ? tj : null);
 
   const splitOn = state.view === 'split';
   const paneWasHidden = $('pane-b').hidden;
   $('pane-b').hidden = !splitOn;
   if (splitOn) ensureMapB();
-  mapA.resize();
-  if (mapB) {
-    if (splitOn && paneWasHidden) mapB.jumpTo({center: mapA.getCenter(), zoom: mapA.getZoom()});
-    mapB.resize();
-    if (mapB.isStyleLoaded()) {
-      setExtent(mapB, tj?.bounds);
-      splitLayer.setOptions({method: state.compare, t: state.t});
+  maps.a.resize();
+  if (maps.b) {
+    if (splitOn && paneWasHidden) maps.b.jumpTo({center: maps.a.getCenter(), zoom: maps.a.getZoom()});
+    maps.b.resize();
+    if (maps.b.isStyleLoaded()) {
+      setExtent(maps.b, tj?.bounds);
+      layers.split.setOptions({method: state.compare, t: state.t});
       const want = splitOn && tj ? tj : null;
-      if (splitLayer.tilejson !== want) splitLayer.setDataset(want);
+      if (layers.split.tilejson !== want) layers.split.setDataset(want);
     }
   }
   renderLegend();
@@ -221,48 +231,33 @@ function renderLegend() {
 
 // ---------------------------------------------------------------- readout and hover
 
-let readoutQueued = false;
-let tStatsTimer = null;
-let lastTStats = null;
-
 function scheduleReadout() {
-  if (readoutQueued) return;
-  readoutQueued = true;
+  if (app.readoutQueued) return;
+  app.readoutQueued = true;
   requestAnimationFrame(() => {
-    readoutQueued = false;
+    app.readoutQueued = false;
     updateReadout();
   });
-  clearTimeout(tStatsTimer);
-  tStatsTimer = setTimeout(() => {
-    lastTStats = mainLayer?.visibleTStats() ?? null;
+  clearTimeout(app.tStatsTimer);
+  app.tStatsTimer = setTimeout(() => {
+    app.lastTStats = app.layers.main?.visibleTStats() ?? null;
     updateReadout();
   }, 150);
 }
 
-function fmtT(t) {
-  return Number(t).toFixed(3);
-}
-
 function updateReadout() {
+  const mapA = app.maps.a;
   if (!mapA) return;
   const zoom = mapA.getZoom();
   const lat = mapA.getCenter().lat;
   $('readout-scale').textContent = formatScale(scaleDenominator(zoom, lat));
-  const s = mainLayer?.state();
-  const q = s?.activeQ;
-  $('readout-zoom').textContent = `zoom ${zoom.toFixed(2)}` + (q != null ? ` · morph ${q.toFixed(3)}` : '');
-  let t = 't –';
-  if (state.t != null) t = `t = ${fmtT(state.t)} (pinned)`;
-  else if (state.method === 'original') t = 't = 0 (original)';
-  else if (lastTStats) {
-    t = `t ≈ ${fmtT(lastTStats.median)}`;
-    if (lastTStats.max - lastTStats.min > 0.0005) t += ` (${fmtT(lastTStats.min)}–${fmtT(lastTStats.max)})`;
-  }
-  $('readout-t').textContent = t;
+  const s = app.layers.main?.state();
+  $('readout-zoom').textContent = zoomReadout(zoom, s?.activeQ);
+  $('readout-t').textContent = tReadout(state.t, state.method, app.lastTStats);
 }
 
 function hover(map, e) {
-  const layers = [mainLayer, overlayLayer, splitLayer].filter((l) => l && l.map === map);
+  const layers = allLayers().filter((l) => l && l.map === map);
   const ids = layers.flatMap((l) => l.visibleLayerIds);
   const tip = $('tooltip');
   if (!ids.length) {
@@ -278,12 +273,7 @@ function hover(map, e) {
   }
   const f = features[0];
   const owner = layers.find((l) => l.visibleLayerIds.includes(f.layer.id));
-  const p = f.properties ?? {};
-  const elev = Number(p.elevation);
-  const elevText = Number.isFinite(elev) ? `${Number.isInteger(elev) ? elev : elev.toFixed(1)} m` : '? m';
-  const tVal = Number(p.t);
-  const tText = Number.isFinite(tVal) ? `t = ${fmtT(tVal)}` : 't –';
-  tip.textContent = `${elevText}${p.index ? ' (index)' : ''} · ${tText} · ${METHOD_NAMES[owner?.method] ?? ''}`;
+  tip.textContent = tooltipText(f.properties, METHOD_NAMES[owner?.method] ?? '');
   tip.style.left = `${e.originalEvent.clientX + 12}px`;
   tip.style.top = `${e.originalEvent.clientY + 12}px`;
   tip.hidden = false;
@@ -292,47 +282,36 @@ function hover(map, e) {
 
 // ---------------------------------------------------------------- datasets
 
-function tilejsonUrl(ds) {
-  return ds.tilejson ?? ds.tilejson_url ?? ds.links?.tilejson ?? `/tiles/${encodeURIComponent(ds.id)}/tilejson.json`;
-}
-
-let datasetList = [];
-let listPoll = null;
-
 async function refreshDatasets() {
-  datasetList = await getJSON('/datasets', 'Listing datasets');
+  const datasetList = await getJSON('/datasets', 'Listing datasets');
+  app.datasetList = datasetList;
   const select = $('dataset');
   select.replaceChildren(
     ...datasetList.map((ds) => {
       const opt = document.createElement('option');
       opt.value = ds.id;
-      let label = ds.name ?? ds.id;
-      if (ds.state === 'building') label += ' (building…)';
-      if (ds.state === 'failed') label += ' (failed)';
-      opt.textContent = label;
+      opt.textContent = datasetLabel(ds);
       opt.disabled = ds.state !== 'ready';
       return opt;
     }),
   );
   if (state.datasetId) select.value = state.datasetId;
   // Keep the list fresh while something builds (an upload from another tab, the sample at start-up).
-  clearTimeout(listPoll);
+  clearTimeout(app.listPoll);
   if (datasetList.some((d) => d.state === 'building')) {
-    listPoll = setTimeout(() => refreshDatasets().then(pickInitialDataset).catch(showError), 1500);
+    app.listPoll = setTimeout(() => refreshDatasets().then(pickInitialDataset).catch(showError), 1500);
   }
   return datasetList;
 }
 
 function pickInitialDataset() {
   if (state.datasetId) return;
-  const wanted = params.get('dataset');
-  const ds =
-    datasetList.find((d) => d.id === wanted && d.state === 'ready') ?? datasetList.find((d) => d.state === 'ready');
+  const ds = initialDataset(app.datasetList, params.get('dataset'));
   if (ds) selectDataset(ds.id, {fit: !initialHashHasCamera}).catch(showError);
 }
 
 async function selectDataset(id, {fit = true} = {}) {
-  const listed = datasetList.find((d) => d.id === id) ?? {id};
+  const listed = app.datasetList.find((d) => d.id === id) ?? {id};
   const [ds, tj] = await Promise.all([
     getJSON(`/datasets/${encodeURIComponent(id)}`, `Dataset “${listed.name ?? id}”`),
     getJSON(tilejsonUrl(listed), `TileJSON of “${listed.name ?? id}”`),
@@ -342,6 +321,7 @@ async function selectDataset(id, {fit = true} = {}) {
   state.dataset = ds;
   state.tilejson = tj;
   $('dataset').value = id;
+  const mapA = app.maps.a;
   await whenStyleLoaded(mapA);
   setExtent(mapA, tj.bounds);
   if (fit) {
@@ -428,26 +408,31 @@ function wireControls() {
 
 // ---------------------------------------------------------------- test and console hooks
 
+function allLayers() {
+  const {main, overlay, split} = app.layers;
+  return [main, overlay, split];
+}
+
 function layersInUse() {
-  return [mainLayer, overlayLayer, splitLayer].filter((l) => l && l.tilejson);
+  return allLayers().filter((l) => l && l.tilejson);
 }
 
 window.ccsm = {
   maplibregl,
   state,
-  errors,
+  errors: app.errors,
   get maps() {
-    return {a: mapA, b: mapB};
+    return {...app.maps};
   },
   get layers() {
-    return {main: mainLayer, overlay: overlayLayer, split: splitLayer};
+    return {...app.layers};
   },
   quantiseZoom,
   selectDataset: (id, opts) => selectDataset(id, opts),
   refreshDatasets: () => refreshDatasets(),
   /** Fix the morph zoom of every layer (null follows the map again). */
   setMorphOverride(q) {
-    for (const l of [mainLayer, overlayLayer, splitLayer]) l?.setOverride(q);
+    for (const l of allLayers()) l?.setOverride(q);
   },
   /** True when every layer in use shows what the camera and controls ask for and all its tiles are in. */
   settled() {
@@ -470,7 +455,7 @@ window.ccsm = {
 async function start() {
   installProtocol();
   try {
-    mapA = createMap('map-a');
+    app.maps.a = createMap('map-a');
   } catch (err) {
     // Without WebGL2 MapLibre throws here ("WebGL2 is required ...") and would never fire load/idle.
     const boot = $('boot');
@@ -480,8 +465,9 @@ async function start() {
     window.ccsm.failed = boot.textContent;
     return;
   }
-  mainLayer = new MorphingContours(mapA, {color: COLOR_MAIN, beforeId: 'anchor-main', ...layerCallbacks()});
-  overlayLayer = new MorphingContours(mapA, {
+  const mapA = app.maps.a;
+  app.layers.main = new MorphingContours(mapA, {color: COLOR_MAIN, beforeId: 'anchor-main', ...layerCallbacks()});
+  app.layers.overlay = new MorphingContours(mapA, {
     color: COLOR_COMPARE,
     beforeId: 'anchor-compare',
     dasharray: [3, 2],
@@ -493,8 +479,8 @@ async function start() {
   await whenStyleLoaded(mapA);
   $('boot').remove();
   await refreshDatasets();
-  if (!datasetList.length) showMessage('No datasets yet: drop a GeoJSON contour file on the map.', 'info');
-  else if (!datasetList.some((d) => d.state === 'ready')) showMessage('The dataset is still being built…', 'info', {timeoutMs: 5000});
+  if (!app.datasetList.length) showMessage('No datasets yet: drop a GeoJSON contour file on the map.', 'info');
+  else if (!app.datasetList.some((d) => d.state === 'ready')) showMessage('The dataset is still being built…', 'info', {timeoutMs: 5000});
   pickInitialDataset();
 }
 

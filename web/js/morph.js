@@ -11,7 +11,7 @@
 // for MIN_PROGRESS_MS is allowed to finish first, so a long continuous gesture still shows intermediate shapes
 // instead of waiting for the gesture to end.
 
-import {quantiseZoom, STEPS_PER_ZOOM} from './scale.js';
+import {clampMorphZoom, quantiseZoom} from './scale.js';
 import {registerSource, unregisterSource} from './protocol.js';
 
 export const MIN_PROGRESS_MS = 150;
@@ -73,11 +73,8 @@ export class MorphingContours {
 
   get desiredQ() {
     if (!this.tilejson) return null;
-    const minzoom = this.tilejson.minzoom ?? 0;
-    const maxzoom = this.tilejson.maxzoom ?? 22;
     const q = this.override ?? quantiseZoom(this.map.getZoom());
-    // Below minzoom nothing is drawn; past maxzoom tiles are over-zoomed and the shape no longer changes.
-    return Math.min(Math.max(q, minzoom), maxzoom + 1 - 1 / STEPS_PER_ZOOM);
+    return clampMorphZoom(q, this.tilejson.minzoom ?? 0, this.tilejson.maxzoom ?? 22);
   }
 
   keyFor(q) {
@@ -216,7 +213,7 @@ export class MorphingContours {
   _checkPending() {
     const p = this.pending;
     if (!p || !this.map.getSource(p.sourceId)) return;
-    let loaded = false;
+    let loaded;
     try {
       loaded = this.map.isSourceLoaded(p.sourceId);
     } catch {

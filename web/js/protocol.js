@@ -4,6 +4,7 @@
 
 import {addProtocol} from 'maplibre-gl';
 import {morphZoomForTile} from './scale.js';
+import {buildTileUrl, ccsmTemplate, parseCcsmUrl} from './tileurl.js';
 
 const configs = new Map();
 let nextKey = 1;
@@ -20,22 +21,11 @@ export function onTileActivity(fn) {
   listeners.add(fn);
 }
 
-/**
- * Build the real tile URL from a TileJSON template (it keeps its own query string, if any) and our parameters.
- */
-export function buildTileUrl(template, z, x, y, params) {
-  const base = new URL(template.replace('{z}', z).replace('{x}', x).replace('{y}', y), window.location.href);
-  for (const [name, value] of Object.entries(params)) {
-    if (value !== null && value !== undefined) base.searchParams.set(name, String(value));
-  }
-  return base.href;
-}
-
 /** Register one source's parameters; returns the `tiles` URL for MapLibre. */
 export function registerSource({template, q, method, t}) {
   const key = `s${nextKey++}`;
   configs.set(key, {template, q, method, t});
-  return {key, url: `ccsm://${key}/{z}/{x}/{y}`};
+  return {key, url: ccsmTemplate(key)};
 }
 
 export function unregisterSource(key) {
@@ -43,18 +33,13 @@ export function unregisterSource(key) {
 }
 
 async function loadTile(params, abortController) {
-  const match = /^ccsm:\/\/([^/]+)\/(\d+)\/(\d+)\/(\d+)$/.exec(params.url);
-  if (!match) throw new Error(`bad ccsm tile URL ${params.url}`);
-  const [, key, zs, xs, ys] = match;
+  const {key, z: zs, x: xs, y: ys} = parseCcsmUrl(params.url);
   const cfg = configs.get(key);
   // A source removed while MapLibre still asks: answer empty, the tile is about to be dropped.
   if (!cfg) return {data: new ArrayBuffer(0)};
   const z = Number(zs);
-  const url = buildTileUrl(cfg.template, zs, xs, ys, {
-    zoom: morphZoomForTile(cfg.q, z),
-    method: cfg.method,
-    t: cfg.t,
-  });
+  const query = {zoom: morphZoomForTile(cfg.q, z), method: cfg.method, t: cfg.t};
+  const url = buildTileUrl(cfg.template, zs, xs, ys, query, window.location.href);
   inFlight += 1;
   notify();
   try {

@@ -35,3 +35,11 @@ export function quantiseZoom(zoom, steps = STEPS_PER_ZOOM) {
 export function morphZoomForTile(q, z, steps = STEPS_PER_ZOOM) {
   return Math.min(Math.max(q, z), z + 1 - 1 / steps);
 }
+
+/**
+ * The morph zoom a dataset's source is made for: below its minzoom nothing is drawn, and past its maxzoom tiles
+ * are over-zoomed so the shape no longer changes; q is kept inside [minzoom, maxzoom + 1).
+ */
+export function clampMorphZoom(q, minzoom, maxzoom, steps = STEPS_PER_ZOOM) {
+  return Math.min(Math.max(q, minzoom), maxzoom + 1 - 1 / steps);
+}
