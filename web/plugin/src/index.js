@@ -34,6 +34,7 @@ export class CcsmMorph {
    * @param {object} options
    * @param {string} [options.url]  a TileJSON URL (the service's /morph/{dataset}/tilejson.json), or
    *   `pmtiles://` followed by the URL of a .pmtiles archive (absolute, or relative to the page)
+   * @param {object} [options.tilejson]  instead of url: the morph TileJSON itself
    * @param {string[]} [options.tiles]  instead of url: tile URL templates with {z}/{x}/{y}
    * @param {number} [options.minzoom]  with `tiles`: the archive's zoom range and bounds
    * @param {number} [options.maxzoom]
@@ -60,6 +61,11 @@ export class CcsmMorph {
       const archive = pmtilesFetcher(new URL(url.slice('pmtiles://'.length), base).href);
       fetchTile = archive.fetchTile;
       this._metadata = archive.metadata().then((m) => this._withOverrides(m));
+    } else if (this.options.tilejson) {
+      const tj = this.options.tilejson;
+      if (!tj.tiles?.length) throw new Error('ccsm-morph: the TileJSON lists no tiles');
+      fetchTile = templateFetcher(tj.tiles[0], {fetch: fetchFn, base});
+      this._metadata = Promise.resolve(this._withOverrides(tj));
     } else if (url) {
       this._metadata = fetchFn(new URL(url, base).href)
         .then((r) => {
@@ -107,6 +113,12 @@ export class CcsmMorph {
   /** Register the protocol with MapLibre: `ccsm.setupMaplibre(maplibregl)`. */
   setupMaplibre(maplibregl) {
     maplibregl.addProtocol(this.protocol, this.loadTile);
+    return this;
+  }
+
+  /** Unregister the protocol (the maps using it should be gone first). */
+  teardownMaplibre(maplibregl) {
+    maplibregl.removeProtocol(this.protocol);
     return this;
   }
 
