@@ -1,10 +1,11 @@
-"""Continuous morphing: zoom in eighths, double-buffered sources, overtaken loads cancelled.
+"""Continuous morphing: CCSM through the ccsm-morph plugin (32 steps per zoom level from morph tiles fetched
+once), the baselines through the eighth-swap (double-buffered sources, overtaken loads cancelled).
 
 How the morph is measured (docs/web.md): the map is zoomed for real, 11.0, 11.125, ... 12.0, and after each
 step the contours on screen are read back with queryRenderedFeatures, whose coordinates are lon/lat. They are
 projected to Web Mercator pixels of one fixed reference zoom and compared inside one fixed geographic box (the
 view at zoom 12), so the map's own scaling changes nothing: only the contour geometry the service sent for the
-new ``zoom=`` moves the measure. The measure is a symmetric mean nearest-point distance between the two frames'
+new step moves the measure. The measure is a symmetric mean nearest-point distance between the two frames'
 densified lines (browser_geometry.chamfer_px), which grows with how far lines move.
 """
 
@@ -20,6 +21,7 @@ from browser_geometry import chamfer_px, frame_points, lonlat_to_px
 pytestmark = pytest.mark.browser
 
 STEPS = [11 + i / 8 for i in range(9)]
+PLUGIN_STEPS = 32  # the plugin's steps per zoom level (web/plugin, stepsPerZoom)
 
 
 def centre_on_data(app):
@@ -31,6 +33,7 @@ def centre_on_data(app):
 
 def test_zoom_in_eighths_morphs_progressively(app):
     app.open()
+    assert app.page.evaluate("() => window.ccsm.layers.main.state().plugin"), "CCSM is not drawn by the plugin"
     centre = centre_on_data(app)
     # The compared box: the middle half of the view at zoom 12, the same ground at every step.
     app.jump(center=centre, zoom=12.0)
@@ -65,7 +68,12 @@ def test_zoom_in_eighths_morphs_progressively(app):
         app.wait_settled()
         assert app.page.evaluate("() => window.ccsm.layers.main.active.q") == zoom
         new_tiles = app.watch.tile_requests()[before:]
-        assert any(f"zoom={zoom:g}" in u or f"zoom={zoom}" in u for u in new_tiles), (zoom, new_tiles[:3])
+        # The plugin draws every step of a level from the morph tiles it already has: no request inside the
+        # level; the step to 12.0 asks for the z12 morph tiles.
+        if zoom < 12:
+            assert new_tiles == [], (zoom, new_tiles[:3])
+        else:
+            assert new_tiles and all("/morph/" in u and "/12/" in u for u in new_tiles), new_tiles[:3]
         frames.append(frame_points(app.rendered_lines(bbox=[w, s, e, n]), box))
 
     if os.environ.get("CCSM_DUMP_FRAMES"):
@@ -89,7 +97,9 @@ def test_zoom_in_eighths_morphs_progressively(app):
 
 
 def test_overtaken_loads_are_cancelled(app):
-    app.open()
+    # The eighth-swap (the baselines' mechanism): a load overtaken by the next eighth is cancelled. The plugin
+    # never needs this (its steps come from memory), so the test runs on Douglas–Peucker.
+    app.open("?method=dp")
     centre = centre_on_data(app)
     app.jump(center=centre, zoom=11.0)
     app.wait_settled()
@@ -133,7 +143,7 @@ def test_fly_to_keeps_contours_on_screen(app):
     app.wait_settled()
     assert app.page.evaluate("() => window.__blank") == 0
     state = app.page.evaluate("() => window.ccsm.layers.main.state()")
-    assert state["activeQ"] == 12.125
+    assert state["plugin"] and state["activeQ"] == int(12.2 * PLUGIN_STEPS) / PLUGIN_STEPS
     assert state["swaps"] - swaps_before >= 2, state
 
 
@@ -159,9 +169,9 @@ def start_at_zoom_11_and_record_swaps(app) -> tuple[float, float]:
     return box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
 
 
-def assert_morphed_through_eighths(app, min_zoom: float) -> None:
+def assert_morphed_through_steps(app, min_zoom: float) -> None:
     """After the gesture: zoomed past ``min_zoom``, never a frame without contours, and the geometry was
-    swapped at several intermediate eighths of a zoom level on the way."""
+    swapped at several intermediate steps (1/32 of a zoom level, the plugin's) on the way."""
     app.wait_settled()
     seen = app.page.evaluate(
         """() => ({zoom: window.ccsm.maps.a.getZoom(), blank: window.__gesture.blank,
@@ -169,22 +179,22 @@ def assert_morphed_through_eighths(app, min_zoom: float) -> None:
     )
     assert seen["zoom"] > min_zoom, seen
     assert seen["blank"] == 0 and seen["renders"] > 0, seen
-    eighths = sorted(q for q in seen["active"] if q is not None and 11.0 < q < seen["zoom"])
-    assert len(eighths) >= 3, seen
-    assert all(abs(q * 8 - round(q * 8)) < 1e-9 for q in eighths), eighths
+    steps = sorted(q for q in seen["active"] if q is not None and 11.0 < q < seen["zoom"])
+    assert len(steps) >= 3, seen
+    assert all(abs(q * PLUGIN_STEPS - round(q * PLUGIN_STEPS)) < 1e-9 for q in steps), steps
 
 
-def test_mouse_wheel_zoom_morphs_through_intermediate_eighths(app):
+def test_mouse_wheel_zoom_morphs_through_intermediate_steps(app):
     # Real wheel events from Playwright's mouse, as a user's scroll wheel sends them to the canvas.
     cx, cy = start_at_zoom_11_and_record_swaps(app)
     app.page.mouse.move(cx, cy)
     for _ in range(12):
         app.page.mouse.wheel(0, -40)
         app.page.wait_for_timeout(120)
-    assert_morphed_through_eighths(app, min_zoom=11.5)
+    assert_morphed_through_steps(app, min_zoom=11.5)
 
 
-def test_two_finger_pinch_morphs_through_intermediate_eighths(app):
+def test_two_finger_pinch_morphs_through_intermediate_steps(app):
     # A real two-finger touch gesture sent through Chromium's input pipeline (DevTools protocol), as a
     # phone or touch screen sends it; MapLibre's own touch handler turns it into zoom.
     cx, cy = start_at_zoom_11_and_record_swaps(app)
@@ -199,4 +209,4 @@ def test_two_finger_pinch_morphs_through_intermediate_eighths(app):
         cdp.send("Input.dispatchTouchEvent", {"type": "touchMove", "touchPoints": fingers(float(half_gap))})
         app.page.wait_for_timeout(60)
     cdp.send("Input.dispatchTouchEvent", {"type": "touchEnd", "touchPoints": []})
-    assert_morphed_through_eighths(app, min_zoom=12.0)
+    assert_morphed_through_steps(app, min_zoom=12.0)
