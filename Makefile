@@ -1,36 +1,84 @@
 # Two commands do all set-up on a fresh machine (see README.md):
-#   make run    install, then serve the bundled sample at http://127.0.0.1:8000
-#   make test   install, then run the whole test suite
+#   make run    install into .venv/, then serve the bundled sample at http://127.0.0.1:8000
+#   make test   install into .venv/, then ruff, import contracts, mypy, the web checks and the whole test suite
+# Everything Python runs from the project's virtual environment .venv/ (made with $(PYTHON) -m venv), so a
+# system Python that refuses installs (PEP 668, "externally-managed-environment") is never pip-installed into.
+# Missing system tools (python3-venv, node/npm, chromium) are installed with apt-get when run as root on
+# Debian/Ubuntu; otherwise make stops and says which command to run.
 PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
 HOST ?= 127.0.0.1
 PORT ?= 8000
+# The browser tests launch this binary (tests/browser/chromium_launch.py); override only to test the check.
+CHROMIUM ?= /usr/bin/chromium
+PYTEST_ARGS ?=
 NPM_DIRS := $(wildcard web tests/app/node bench/geojsonvt)
 
-.PHONY: run test install bench evaluate lint
+.PHONY: run test install bench evaluate lint need-node need-chromium
+# Steps install system packages and share one venv: never run them side by side (make -j).
+.NOTPARALLEL:
 
-.install-stamp: pyproject.toml $(foreach d,$(NPM_DIRS),$(wildcard $(d)/package-lock.json))
-	$(PYTHON) -m pip install --quiet --disable-pip-version-check -e ".[dev]"
+# $(call need,CHECK,PACKAGES,WHAT): if the shell command CHECK fails, install the Debian PACKAGES when root
+# (and apt-get exists), else stop with the command to run. No commas in the arguments.
+define need
+@if ! { $(1); }; then \
+  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+    echo "$(3) is missing: apt-get install $(2)"; \
+    export DEBIAN_FRONTEND=noninteractive; \
+    apt-get update -qq && apt-get install -y -qq $(2) >/dev/null || exit 1; \
+    { $(1); } || { echo "error: $(3) is still missing after apt-get install $(2)" >&2; exit 1; }; \
+  else \
+    echo "error: $(3) is missing. Install it, then run make again:" >&2; \
+    echo "    sudo apt-get install $(2)" >&2; \
+    exit 1; \
+  fi; \
+fi
+endef
+
+need-node:
+	$(call need,command -v node >/dev/null 2>&1 && command -v npm >/dev/null 2>&1,nodejs npm,Node.js (node and npm))
+
+need-chromium:
+	$(call need,[ -x "$(CHROMIUM)" ],chromium fonts-dejavu-core,Chromium ($(CHROMIUM)) for the browser tests)
+
+# The virtual environment. Debian's python3 makes a venv only with python3-venv (ensurepip) installed.
+$(BIN)/pip:
+	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found; install Python >= 3.11 or run make PYTHON=/path/to/python3" >&2; exit 1; }
+	$(call need,$(PYTHON) -c "import ensurepip" >/dev/null 2>&1,python3-venv,Python's venv support (ensurepip) for $(PYTHON))
+	$(PYTHON) -m venv $(VENV)
+
+# Reinstalls only when the venv, pyproject.toml or an npm manifest changes.
+.install-stamp: $(BIN)/pip pyproject.toml $(foreach d,$(NPM_DIRS),$(wildcard $(d)/package.json $(d)/package-lock.json)) | need-node
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e ".[dev]"
 	@for d in $(NPM_DIRS); do \
 	  if [ -f $$d/package.json ]; then echo "npm ci in $$d"; (cd $$d && npm ci --no-audit --no-fund --loglevel=error) || exit 1; fi; \
 	done
-	$(PYTHON) -m engine.warmup
+	$(BIN)/python -m engine.warmup
 	touch .install-stamp
 
 install: .install-stamp
 
 run: install
-	ccsm serve --host $(HOST) --port $(PORT)
+	$(BIN)/ccsm serve --host $(HOST) --port $(PORT)
 
-test: install
-	$(PYTHON) -m pytest -q
+# Never passes with a tool missing: node and chromium are required (the tests fail rather than skip without
+# them), and pytest's status 5 (no tests collected) fails make like any other non-zero status.
+# Tools are checked first, so a missing one stops make before the long install.
+test: need-node need-chromium install lint
+	cd web && npm run --if-present test
+	$(BIN)/python -m pytest -q $(PYTEST_ARGS)
 
 bench: install
-	$(PYTHON) bench/bench_engine.py
-	$(PYTHON) bench/bench_tiles.py
+	$(BIN)/python bench/bench_engine.py
+	$(BIN)/python bench/bench_tiles.py
 
 evaluate: install
-	ccsm evaluate data/sample/jacksboro_contours_20m.geojson --out out/evaluation
+	$(BIN)/ccsm evaluate data/sample/jacksboro_contours_20m.geojson --out out/evaluation
 
+# ruff (with a complexity limit), the import-linter layering contracts and mypy (pydantic plugin) on engine
+# and app: all part of make test.
 lint: install
-	ruff check engine app tests bench
-	mypy engine
+	$(BIN)/ruff check engine app tests bench
+	$(BIN)/lint-imports
+	$(BIN)/mypy

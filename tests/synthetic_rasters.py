@@ -41,3 +41,14 @@ def write_geotiff(
     with rasterio.open(path, "w", **profile) as dst:
         dst.write(z, 1)
     return path
+
+
+def fractal_heights(seed: int, beta: float, n: int = 128, relief_m: float = 400.0) -> np.ndarray:
+    """(n, n) heights with a 1 / k^beta power spectrum, rounded to whole metres."""
+    rng = np.random.default_rng(seed)
+    k = np.hypot(np.fft.fftfreq(n)[:, None], np.fft.rfftfreq(n)[None, :])
+    k[0, 0] = 1.0
+    spectrum = (rng.standard_normal(k.shape) + 1j * rng.standard_normal(k.shape)) * k ** (-beta / 2)
+    spectrum[0, 0] = 0.0
+    z = np.fft.irfft2(spectrum, s=(n, n))
+    return np.round(200.0 + (z - z.min()) / np.ptp(z) * relief_m)

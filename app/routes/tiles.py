@@ -13,11 +13,26 @@ from app.dependencies import TileQuery, get_service, get_settings
 from app.responses import accepts_gzip, body_response, etag_matches, make_etag
 from app.service import DatasetService, lonlat_bounds
 from app.settings import Settings
+from engine.serve.renderer import MORPH_END_LAYER, MORPH_START_LAYER, MORPH_T_SAMPLES
+from engine.tiles.grid import check_tile
 from engine.tiles.scale import zoom_for_scale
 
 router = APIRouter(tags=["tiles"])
 
 MVT_MEDIA_TYPE = "application/vnd.mapbox-vector-tile"
+
+#: The morph tile's extra fields, as TileJSON lists them (docs/morph-tiles.md).
+MORPH_FIELDS = {
+    **{f"t{k}": f"Number: t at zoom z + {k}/{MORPH_T_SAMPLES}" for k in range(1, MORPH_T_SAMPLES + 1)},
+    "min_zoom": "Number: draw the contour only where the zoom is above this",
+}
+#: What a morph client needs to know about the format.
+MORPH_TILEJSON = {
+    "version": 1,
+    "t_samples": MORPH_T_SAMPLES,
+    "start_layer": MORPH_START_LAYER,
+    "end_layer": MORPH_END_LAYER,
+}
 
 DatasetPath = Annotated[str, Path(description="Dataset id (see GET /datasets).", max_length=64)]
 
@@ -75,20 +90,78 @@ async def get_tile(
     return body_response(request, result.data, MVT_MEDIA_TYPE, headers)
 
 
+@router.get(
+    "/morph/{dataset}/{z}/{x}/{y}.mvt",
+    response_class=Response,
+    responses={
+        200: {
+            "content": {MVT_MEDIA_TYPE: {}},
+            "description": "The morph tile: layers `contours` (at zoom z) and `contours_end` (at z + 1).",
+        },
+        204: {"description": "No contour in this tile."},
+        304: {"description": "Not modified (If-None-Match matched the ETag)."},
+        404: {"description": "Unknown dataset, or z/x/y outside the tile matrix or the served zooms."},
+    },
+    name="get_morph_tile",
+)
+async def get_morph_tile(
+    request: Request,
+    dataset: DatasetPath,
+    z: Annotated[int, Path(description="Zoom level of the tile; it carries the morph over [z, z + 1).", ge=0, le=30)],
+    x: Annotated[int, Path(description="Tile column, 0 at the antimeridian (west).", ge=0)],
+    y: Annotated[int, Path(description="Tile row, 0 at the north edge (XYZ scheme).", ge=0)],
+    service: Annotated[DatasetService, Depends(get_service)],
+    settings: Annotated[Settings, Depends(get_settings)],
+) -> Response:
+    """One morph tile: the CCSM contours at both ends of the zoom level with the same vertices, and their t
+    through the level, so a client draws every zoom inside the level without asking again
+    (docs/morph-tiles.md)."""
+    renderer = service.renderer
+    check_tile(z, x, y, settings.min_zoom, settings.max_zoom)
+    version = service.require_ready(dataset)
+    gz = accepts_gzip(request)
+    etag = make_etag("morph", dataset, version, z, x, y, settings.tile_extent, settings.tile_buffer, gz)
+    headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
+    if etag_matches(request, etag):
+        return Response(status_code=304, headers=headers)
+    result = await run_in_threadpool(renderer.morph_tile, dataset, z, x, y)
+    if result.data is None:
+        return Response(status_code=204, headers=headers)
+    return body_response(request, result.data, MVT_MEDIA_TYPE, headers)
+
+
 @router.get("/tiles/{dataset}/tilejson.json", name="get_tilejson")
 def get_tilejson(
     request: Request,
     dataset: DatasetPath,
     service: Annotated[DatasetService, Depends(get_service)],
     settings: Annotated[Settings, Depends(get_settings)],
-) -> JSONResponse:
+) -> Response:
     """TileJSON 3.0.0 of a dataset: tile URL template (keeps this request's query string), bounds, layers."""
+    return tilejson_response(request, dataset, "tiles", service, settings)
+
+
+@router.get("/morph/{dataset}/tilejson.json", name="get_morph_tilejson")
+def get_morph_tilejson(
+    request: Request,
+    dataset: DatasetPath,
+    service: Annotated[DatasetService, Depends(get_service)],
+    settings: Annotated[Settings, Depends(get_settings)],
+) -> Response:
+    """TileJSON 3.0.0 of a dataset's morph tiles (docs/morph-tiles.md): both layers and ``ccsm_morph``."""
+    return tilejson_response(request, dataset, "morph", service, settings)
+
+
+def tilejson_response(
+    request: Request, dataset: str, kind: str, service: DatasetService, settings: Settings
+) -> Response:
+    """The TileJSON of the per-level tiles (``kind`` tiles) or of the morph tiles (``kind`` morph)."""
     version = service.require_ready(dataset)
     info, interval = service.renderer.info(dataset)
     query = [(k, v) for k, v in request.query_params.multi_items() if k != "v"]
     query.append(("v", str(version)))
     base = str(request.base_url).rstrip("/")
-    url = f"{base}/tiles/{dataset}/{{z}}/{{x}}/{{y}}.mvt?{urlencode(query)}"
+    url = f"{base}/{kind}/{dataset}/{{z}}/{{x}}/{{y}}.mvt?{urlencode(query)}"
     bounds = lonlat_bounds(info)
     lat = (bounds[1] + bounds[3]) / 2
     start_zoom = int(
@@ -97,7 +170,21 @@ def get_tilejson(
             max(settings.min_zoom, round(float(zoom_for_scale(info.source_scale, lat)) - 1)),
         )
     )
-    body = {
+    fields = {
+        "elevation": "Number: height of the contour",
+        "index": f"Boolean: true on every 5th interval ({5 * interval:g})" if interval else "Boolean",
+        "t": "Number: generalization parameter in [0, 1] (0 = source detail)",
+    }
+    layers: list[dict[str, Any]] = [
+        {
+            "id": "contours",
+            "description": "Contour lines; each feature id is stable across zooms.",
+            "minzoom": settings.min_zoom,
+            "maxzoom": settings.max_zoom,
+            "fields": fields,
+        }
+    ]
+    body: dict[str, Any] = {
         "tilejson": "3.0.0",
         "name": info.name,
         "description": "Terrain contours generalized continuously with the zoom (CCSM, Qian et al. 2021).",
@@ -109,25 +196,23 @@ def get_tilejson(
         "maxzoom": settings.max_zoom,
         "bounds": bounds,
         "center": [round((bounds[0] + bounds[2]) / 2, 6), round(lat, 6), start_zoom],
-        "vector_layers": [
-            {
-                "id": "contours",
-                "description": "Contour lines; each feature id is stable across zooms.",
-                "minzoom": settings.min_zoom,
-                "maxzoom": settings.max_zoom,
-                "fields": {
-                    "elevation": "Number: height of the contour",
-                    "index": f"Boolean: true on every 5th interval ({5 * interval:g})"
-                    if interval
-                    else "Boolean",
-                    "t": "Number: generalization parameter in [0, 1] (0 = source detail)",
-                },
-            }
-        ],
+        "vector_layers": layers,
         "data_version": version,
     }
+    if kind == "morph":
+        fields.update(MORPH_FIELDS)
+        layers.append(
+            {
+                "id": MORPH_END_LAYER,
+                "description": "The same contours with the same vertices, as at zoom z + 1.",
+                "minzoom": settings.min_zoom,
+                "maxzoom": settings.max_zoom,
+                "fields": {},
+            }
+        )
+        body["ccsm_morph"] = MORPH_TILEJSON
     etag = make_etag("tilejson", dataset, version, str(request.url))
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={min(settings.cache_max_age, 60)}"}
     if etag_matches(request, etag):
-        return Response(status_code=304, headers=headers)  # type: ignore[return-value]
+        return Response(status_code=304, headers=headers)
     return JSONResponse(body, headers=headers)

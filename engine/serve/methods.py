@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from engine.baselines import BASELINE_METHODS, simplify_at_scale
+from engine.ccsm.regression import t_at_scales
 from engine.ccsm.similarity import similarity
 from engine.geom.polyline import closed_path
 from engine.io.crs import WEB_MERCATOR, make_transformer
@@ -102,10 +103,13 @@ class Method(ABC):
 
 @dataclass(frozen=True)
 class TileContext:
-    """What a method may need besides the pack: the dataset's metadata and its decoded rows."""
+    """What a method may need besides the pack: the dataset's metadata, its decoded rows, and the scale at
+    the end of the tile's zoom level (z + 1), where what is decided once per level is decided."""
 
     info: DatasetInfo
     source: RecordSource
+    level_end_scale: float
+    t_pinned: bool = False
 
 
 class ContinuousMethod(Method):
@@ -117,8 +121,13 @@ class ContinuousMethod(Method):
     def tile_lines(
         self, pack: DatasetPack, idx: NDArray[np.intp], ts: NDArray[np.float64], scale: float, ctx: TileContext
     ) -> TileLines:
-        """CCS rows; a contour drawn at the target (t = 1) keeps rows by the target's own significance."""
-        at_top = ts >= 1.0
+        """CCS rows; a contour at the target (t = 1) through the whole zoom level keeps rows by the target's own
+        significance. The rows are chosen once per level, so every zoom inside it (and a morph tile) keeps
+        the same vertices."""
+        if ctx.t_pinned:
+            at_top = ts >= 1.0
+        else:  # t only falls as the zoom rises: at the target at z + 1 means at the target all level long
+            at_top = t_at_scales(ctx.info.ladder, pack.tables[idx], ctx.level_end_scale) >= 1.0
         return TileLines(pack.ccs, idx, ts, at_top.astype(np.int64), at_top)
 
     def contour_at(self, rec: ContourRecord, t: float, scale: float, info: DatasetInfo) -> tuple[Coords, float]:

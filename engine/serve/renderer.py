@@ -15,6 +15,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,12 +30,18 @@ from engine.store.sqlite import CCSStore, ContourRecord, DatasetInfo
 from engine.tiles.clip import clip_lines_fast
 from engine.tiles.grid import Tile, buffered, check_fractional_zoom, check_tile, tile_bounds, tile_center_latitude
 from engine.tiles.mvt import encode_line_tile
-from engine.tiles.runs import ranges, slice_runs
-from engine.tiles.scale import scale_for_zoom
+from engine.tiles.runs import morph_runs, ranges, slice_runs
+from engine.tiles.scale import scale_for_zoom, zoom_for_scale
 from engine.types import Bounds
 
 #: Decimals of the ``t`` property (1e-4 of the source-to-target range is far below a pixel).
 T_DECIMALS = 4
+#: Samples of t through a zoom level in a morph tile (docs/morph-tiles.md: 8 keep the morph well within a
+#: tile unit of the server's slices; 4 do not everywhere).
+MORPH_T_SAMPLES = 8
+#: Layers of a morph tile: the contours as at zoom z, and the same vertices as at zoom z + 1.
+MORPH_START_LAYER = "contours"
+MORPH_END_LAYER = "contours_end"
 
 
 @dataclass(frozen=True)
@@ -240,7 +247,9 @@ class Renderer:
             ts = np.full(len(idx), t_pin)
         else:
             ts = t_at_scales(info.ladder, pack.tables[idx], scale)
-        lines = how.tile_lines(pack, idx, ts, scale, TileContext(info, self))
+        level_end = self.scale_of_tile(tile, float(z + 1))
+        pinned = how.honours_t and t_pin is not None
+        lines = how.tile_lines(pack, idx, ts, scale, TileContext(info, self, level_end, pinned))
         parts = self.cut(lines, bounds, box)
         if parts is None:
             return TileResult(None, 0, zoomf, scale)
@@ -256,6 +265,74 @@ class Renderer:
         )
         return TileResult(data, len(cs), zoomf, scale)
 
+    def morph_tile(self, dataset: str, z: int, x: int, y: int) -> TileResult:
+        """A morph tile: the CCSM contours at zoom ``z`` and at ``z + 1`` with the same vertices, and their t at
+        eight steps through the level (the format is in docs/morph-tiles.md).
+
+        Raises
+        ------
+        TileOutOfRange, UnknownLayer
+        """
+        tile = check_tile(z, x, y, self.options.min_zoom, self.options.max_zoom)
+        info, _ = self.info(dataset)
+        opts = self.options
+        bounds = tile_bounds(tile)
+        box = buffered(bounds, opts.buffer_px, opts.extent)
+        lat = max(-85.05, min(85.05, tile_center_latitude(tile)))
+        scales = scale_for_zoom(z + np.arange(MORPH_T_SAMPLES + 1) / MORPH_T_SAMPLES, lat)
+        fids = self.store.query(dataset, box)
+        if not fids:
+            return TileResult(None, 0, float(z), float(scales[0]))
+        pack, where = self.packed(dataset, fids)
+        idx = where[scales[-1] < pack.vanish[where]]  # drawn somewhere in the level: at its finest end
+        if len(idx) == 0:
+            return TileResult(None, 0, float(z), float(scales[0]))
+        ts = np.stack([t_at_scales(info.ladder, pack.tables[idx], float(s)) for s in scales])  # (9, n)
+        drawn = self.methods["ccsm"].tile_lines(pack, idx, ts[0], float(scales[0]), TileContext(info, self, float(scales[-1])))
+        runs = runs_meeting(drawn, box)
+        if runs is None:
+            return TileResult(None, 0, float(z), float(scales[0]))
+        a, b, run_owner = runs
+        q0, q1, part_len, part_run = morph_runs(
+            a,
+            b,
+            ts[0][run_owner],
+            ts[-1][run_owner],
+            drawn.column[run_owner],
+            drawn.refill[run_owner],
+            pack.ccs.sig,
+            pack.ccs.base,
+            pack.ccs.top,
+            self.min_significance(box),
+            bounds,
+            opts.extent,
+            opts.buffer_px,
+        )
+        if len(part_len) == 0:
+            return TileResult(None, 0, float(z), float(scales[0]))
+        owners, counts = np.unique(run_owner[part_run], return_counts=True)
+        cs = idx[owners]
+        vanish = pack.vanish[cs]
+        finite = np.isfinite(vanish)  # an infinite vanishing scale: a line that never goes
+        appear = np.zeros(len(cs))
+        appear[finite] = np.maximum(zoom_for_scale(vanish[finite], lat), 0.0)
+        columns: dict[str, list[Any]] = {
+            "elevation": pack.elevation[cs].tolist(),
+            "index": pack.index[cs].tolist(),
+            "t": np.round(ts[0][owners], T_DECIMALS).tolist(),
+        }
+        for k in range(1, MORPH_T_SAMPLES + 1):
+            columns[f"t{k}"] = np.round(ts[k][owners], T_DECIMALS).tolist()
+        columns["min_zoom"] = np.round(appear, T_DECIMALS).tolist()
+        ids = pack.fid[cs].tolist()
+        start = encode_line_tile(MORPH_START_LAYER, ids, columns, q0, part_len, counts, opts.extent)
+        end = encode_line_tile(MORPH_END_LAYER, ids, {}, q1, part_len, counts, opts.extent)
+        return TileResult(start + end, len(cs), float(z), float(scales[0]))
+
+    def min_significance(self, box: Bounds) -> float:
+        """Rows less significant than half a grid unit cannot move the quantised line (tiles.significance)."""
+        return 0.5 * (box.maxx - box.minx) / (self.options.extent + 2 * self.options.buffer_px)
+
     def cut(self, drawn: TileLines, bounds: Bounds, box: Bounds) -> TileParts | None:
         """The tile pipeline after the method: runs of rows that meet ``box``, sliced, thinned, quantised,
         clipped to the buffered tile; None when nothing is left.
@@ -265,28 +342,10 @@ class Renderer:
         """
         opts = self.options
         lines = drawn.lines
-        which = drawn.which
-        # Chunks of the drawn lines that meet the box, merged into runs of rows.
-        c_lo, c_hi = lines.chunk_off[which], lines.chunk_off[which + 1]
-        ci = ranges(c_lo, c_hi)
-        ch = lines.chunks[ci]
-        hit = (ch[:, 2] >= box.minx) & (ch[:, 0] <= box.maxx) & (ch[:, 3] >= box.miny) & (ch[:, 1] <= box.maxy)
-        h = np.flatnonzero(hit)
-        if len(h) == 0:
+        runs = runs_meeting(drawn, box)
+        if runs is None:
             return None
-        owner_of_chunk = np.repeat(np.arange(len(which)), c_hi - c_lo)
-        hc, own = ci[h], owner_of_chunk[h]
-        cut = np.flatnonzero((np.diff(hc) != 1) | (np.diff(own) != 0))
-        first = np.concatenate([[0], cut + 1])
-        last = np.concatenate([cut, [len(h) - 1]])
-        run_owner = own[first]
-        c = which[run_owner]
-        row0 = lines.off[c]
-        size = lines.chunk_rows
-        a = row0 + (hc[first] - lines.chunk_off[c]) * size
-        b = np.minimum(row0 + (hc[last] - lines.chunk_off[c] + 1) * size + 1, lines.off[c + 1])
-        # Rows whose significance is below half a grid unit cannot move the quantised line (tiles.significance).
-        min_sig = 0.5 * (box.maxx - box.minx) / (opts.extent + 2 * opts.buffer_px)
+        a, b, run_owner = runs
         q, plen, pbox = slice_runs(
             a,
             b,
@@ -296,7 +355,7 @@ class Renderer:
             lines.sig,
             lines.base,
             lines.top,
-            min_sig,
+            self.min_significance(box),
             bounds,
             opts.extent,
         )
@@ -325,3 +384,31 @@ class Renderer:
         pts = all_pts[ranges(part_start, part_start + part_len)]
         owners, counts = np.unique(part_owner, return_counts=True)
         return TileParts(pts, part_len, counts, owners)
+
+
+def runs_meeting(
+    drawn: TileLines, box: Bounds
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]] | None:
+    """Runs of rows [a, b) of the drawn lines whose chunks meet ``box`` (consecutive chunks merged), with the
+    contour each run belongs to (runs grouped by contour, in line order); None when no chunk meets it."""
+    lines = drawn.lines
+    which = drawn.which
+    c_lo, c_hi = lines.chunk_off[which], lines.chunk_off[which + 1]
+    ci = ranges(c_lo, c_hi)
+    ch = lines.chunks[ci]
+    hit = (ch[:, 2] >= box.minx) & (ch[:, 0] <= box.maxx) & (ch[:, 3] >= box.miny) & (ch[:, 1] <= box.maxy)
+    h = np.flatnonzero(hit)
+    if len(h) == 0:
+        return None
+    owner_of_chunk = np.repeat(np.arange(len(which)), c_hi - c_lo)
+    hc, own = ci[h], owner_of_chunk[h]
+    cut = np.flatnonzero((np.diff(hc) != 1) | (np.diff(own) != 0))
+    first = np.concatenate([[0], cut + 1])
+    last = np.concatenate([cut, [len(h) - 1]])
+    run_owner = own[first]
+    c = which[run_owner]
+    row0 = lines.off[c]
+    size = lines.chunk_rows
+    a = row0 + (hc[first] - lines.chunk_off[c]) * size
+    b = np.minimum(row0 + (hc[last] - lines.chunk_off[c] + 1) * size + 1, lines.off[c + 1])
+    return a, b, run_owner

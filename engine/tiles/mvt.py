@@ -302,6 +302,8 @@ def _value_table(
     """Value index of every (feature, property) and the value table, in order of first use, as the MVT
     encoder's dict would number them; None when a column is not all floats or all bools."""
     k = len(columns)
+    if k == 0:
+        return np.zeros((n, 0), dtype=np.int64), []
     groups: dict[bool, tuple[list[NDArray[np.float64]], list[NDArray[np.int64]]]] = {True: ([], []), False: ([], [])}
     for j, col in enumerate(columns):
         arr = np.asarray(col)

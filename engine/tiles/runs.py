@@ -191,3 +191,142 @@ def slice_runs(
         box,
     )
     return out[:n], plen, box
+
+
+@njit(cache=True)
+def _quantised_at(base, top, i, t, x0, y0, k):  # pragma: no cover - compiled
+    if t >= 1.0:
+        x = top[i, 0]
+        y = top[i, 1]
+    elif t <= 0.0:
+        x = base[i, 0]
+        y = base[i, 1]
+    else:
+        x = base[i, 0] + t * (top[i, 0] - base[i, 0])
+        y = base[i, 1] + t * (top[i, 1] - base[i, 1])
+    return np.int64(np.rint((x - x0) * k)), np.int64(np.rint((y0 - y) * k))
+
+
+@njit(cache=True)
+def _segment_reaches(s0, s1, j, lo, hi):  # pragma: no cover - compiled
+    # The segment's path through the level lies in the box of its two ends at both zooms.
+    mnx = min(min(s0[j, 0], s0[j + 1, 0]), min(s1[j, 0], s1[j + 1, 0]))
+    mxx = max(max(s0[j, 0], s0[j + 1, 0]), max(s1[j, 0], s1[j + 1, 0]))
+    mny = min(min(s0[j, 1], s0[j + 1, 1]), min(s1[j, 1], s1[j + 1, 1]))
+    mxy = max(max(s0[j, 1], s0[j + 1, 1]), max(s1[j, 1], s1[j + 1, 1]))
+    return mxx >= lo and mnx <= hi and mxy >= lo and mny <= hi
+
+
+@njit(cache=True)
+def _morph_runs_kernel(
+    a, b, t0, t1, col, refill, sig, base, top, min_sig, x0, y0, k, lo, hi, q0, q1, plen, prun, s0, s1
+):  # noqa: C901  # pragma: no cover - compiled, one loop nest
+    n = 0
+    p = 0
+    for r in range(len(a)):
+        c = col[r]
+        full = False
+        while True:
+            m = 0
+            last = b[r] - 1
+            for i in range(a[r], b[r]):
+                if not full and i != a[r] and i != last and not sig[i, c] > min_sig:
+                    continue
+                ax, ay = _quantised_at(base, top, i, t0[r], x0, y0, k)
+                bx, by = _quantised_at(base, top, i, t1[r], x0, y0, k)
+                if m > 0 and ax == s0[m - 1, 0] and ay == s0[m - 1, 1] and bx == s1[m - 1, 0] and by == s1[m - 1, 1]:
+                    continue
+                s0[m, 0] = ax
+                s0[m, 1] = ay
+                s1[m, 0] = bx
+                s1[m, 1] = by
+                m += 1
+            if not full and refill[r] and m < 2 and b[r] - a[r] > 2:
+                full = True
+                continue
+            break
+        j = 0
+        while j < m - 1:
+            if not _segment_reaches(s0, s1, j, lo, hi):
+                j += 1
+                continue
+            start = n
+            q0[n, 0] = s0[j, 0]
+            q0[n, 1] = s0[j, 1]
+            q1[n, 0] = s1[j, 0]
+            q1[n, 1] = s1[j, 1]
+            n += 1
+            while j < m - 1 and _segment_reaches(s0, s1, j, lo, hi):
+                q0[n, 0] = s0[j + 1, 0]
+                q0[n, 1] = s0[j + 1, 1]
+                q1[n, 0] = s1[j + 1, 0]
+                q1[n, 1] = s1[j + 1, 1]
+                n += 1
+                j += 1
+            plen[p] = n - start
+            prun[p] = r
+            p += 1
+    return n, p
+
+
+def morph_runs(
+    a: NDArray[np.int64],
+    b: NDArray[np.int64],
+    t_start: NDArray[np.float64],
+    t_end: NDArray[np.float64],
+    col: NDArray[np.int64],
+    refill: NDArray[np.bool_],
+    sig: NDArray[np.float32],
+    base: NDArray[np.float64],
+    top: NDArray[np.float64],
+    min_sig: float,
+    bounds: Bounds,
+    extent: int,
+    buffer_px: int,
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """Runs of rows sliced at two t with the same vertices: the two ends of a zoom level of a morph tile.
+
+    Rows are chosen once for both ends (as :func:`slice_runs` chooses them); a row is dropped only when it
+    lands on the previous kept row at both ends. Instead of clipping (the cut point would move with t), a
+    run keeps the segments whose path through the level can reach the buffered tile (the box of the
+    segment's ends at both t meets it) and is split into parts where it cannot.
+
+    Returns
+    -------
+    (q_start, q_end, part_len, part_run)
+        The parts' points at ``t_start`` and at ``t_end`` (same shape), each part's number of points (>= 2)
+        and the run each part comes from (parts in run order).
+    """
+    total = int((b - a).sum())
+    longest = int((b - a).max()) if len(a) else 0
+    q0 = np.empty((max(total, 1), 2), dtype=np.int64)
+    q1 = np.empty_like(q0)
+    plen = np.empty(max(total, 1), dtype=np.int64)
+    prun = np.empty(max(total, 1), dtype=np.int64)
+    s0 = np.empty((max(longest, 1), 2), dtype=np.int64)
+    s1 = np.empty_like(s0)
+    k = extent / (bounds.maxx - bounds.minx)
+    n, p = _morph_runs_kernel(
+        np.ascontiguousarray(a, dtype=np.int64),
+        np.ascontiguousarray(b, dtype=np.int64),
+        np.ascontiguousarray(t_start, dtype=np.float64),
+        np.ascontiguousarray(t_end, dtype=np.float64),
+        np.ascontiguousarray(col, dtype=np.int64),
+        np.ascontiguousarray(refill, dtype=np.bool_),
+        sig,
+        base,
+        top,
+        float(min_sig),
+        float(bounds.minx),
+        float(bounds.maxy),
+        float(k),
+        -buffer_px,
+        extent + buffer_px,
+        q0,
+        q1,
+        plen,
+        prun,
+        s0,
+        s1,
+    )
+    return q0[:n], q1[:n], plen[:p], prun[:p]

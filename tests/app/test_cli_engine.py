@@ -83,10 +83,9 @@ def test_simplify_subset_writes_every_contour_with_properties(
         assert set(props) >= {"id", "elevation", "t", "similarity", "scale"}
         assert props["scale"] == 250000
         assert 0.0 < props["similarity"] <= 1.0 + 1e-9
-        if method == "ccsm":
-            assert 0.0 <= props["t"] <= 1.0
-        else:
-            assert props["t"] is None
+        # As in GET /simplify: every method reports the contour's CCSM t at that scale, and its own name.
+        assert 0.0 <= props["t"] <= 1.0
+        assert props["method"] == method
 
 
 def test_simplify_output_crs_3857_and_source(subset_path: Path, tmp_path: Path) -> None:

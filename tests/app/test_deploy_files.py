@@ -4,12 +4,10 @@ from __future__ import annotations
 
 import re
 
-import pytest
+import yaml
 
 from app.settings import Settings
 from tests.app.conftest import REPO
-
-yaml = pytest.importorskip("yaml")
 
 
 def dockerfile() -> list[tuple[str, str]]:

@@ -58,7 +58,7 @@ def test_unchanged_source_is_not_rebuilt_changed_one_is(store, src, tmp_path):
 def test_failed_write_rolls_back(store, src, monkeypatch):
     before = store.dataset("h")
     fids = store.all_fids("h")
-    import engine.store.sqlite as mod
+    import engine.serve.records as mod
 
     calls = {"n": 0}
     real = mod.row_significance

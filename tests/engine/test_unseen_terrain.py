@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 import shapely
-from synthetic_rasters import write_geotiff
+from synthetic_rasters import fractal_heights, write_geotiff
 
 from engine.ccsm.build import build_contour_set, t_for_scale_all
 from engine.ccsm.similarity import similarity
@@ -49,17 +49,6 @@ TERRAINS = {
     # Smoother relief at 3 arc-seconds in lon/lat, in New Zealand: the reader must pick UTM 60S itself.
     "geographic-nz": Terrain(seed=2, beta=3.0, crs="EPSG:4326", west=174.0, north=-41.0, cell=1 / 1200),
 }
-
-
-def fractal_heights(seed: int, beta: float, n: int = 128, relief_m: float = 400.0) -> np.ndarray:
-    """(n, n) heights with a 1 / k^beta power spectrum, rounded to whole metres."""
-    rng = np.random.default_rng(seed)
-    k = np.hypot(np.fft.fftfreq(n)[:, None], np.fft.rfftfreq(n)[None, :])
-    k[0, 0] = 1.0
-    spectrum = (rng.standard_normal(k.shape) + 1j * rng.standard_normal(k.shape)) * k ** (-beta / 2)
-    spectrum[0, 0] = 0.0
-    z = np.fft.irfft2(spectrum, s=(n, n))
-    return np.round(200.0 + (z - z.min()) / np.ptp(z) * relief_m)
 
 
 @pytest.fixture(scope="module", params=sorted(TERRAINS))

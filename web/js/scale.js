@@ -2,7 +2,7 @@
 //
 // MapLibre draws vector tiles at 512 px; with the OGC pixel of 0.28 mm the scale denominator at zoom z and
 // latitude phi is S = 2*pi*6378137*cos(phi) / (512 * 2^z) / 0.00028 = 279,541,132 * cos(phi) / 2^z
-// (DESIGN.md section 4).
+// (docs/design.md section 4).
 
 export const SCALE_AT_ZOOM_0 = (2 * Math.PI * 6378137) / 512 / 0.00028; // 279,541,132.01...
 
