@@ -1,6 +1,7 @@
-"""Watch a morph from inside the page: every rendered frame, the contours in a box in the middle of the map are
-read back (queryRenderedFeatures on the layers on screen) and fingerprinted, so a test can count the distinct
-shapes drawn and the frames that drew no contour at all. Also: a slow real mouse-wheel zoom through a level.
+"""Watch a morph from inside the page: every rendered frame is checked for contours in a box in the middle of
+the map (queryRenderedFeatures on the layers on screen), and every new step on screen is fingerprinted, so a
+test can count the frames that drew no contour and the distinct shapes drawn. Also: a slow real mouse-wheel
+zoom through a level.
 """
 
 from __future__ import annotations
@@ -14,25 +15,28 @@ INSTALL = """([mapExpr, layersExpr, shownExpr]) => {
     const map = eval(mapExpr);
     const layers = () => eval(layersExpr);
     const shown = () => eval(shownExpr);
-    const probe = {frames: 0, blank: 0, shapes: new Set(), steps: new Set()};
+    const probe = {frames: 0, blank: 0, shapes: new Set(), steps: new Set(), last: undefined};
     probe.onRender = () => {
         const c = map.getCanvas().getBoundingClientRect(), x = c.width / 2, y = c.height / 2;
-        const box = [[x - 40, y - 40], [x + 40, y + 40]];
         const ids = layers();
-        const fs = ids.length ? map.queryRenderedFeatures(box, {layers: ids}) : [];
         probe.frames += 1;
-        if (!fs.length) { probe.blank += 1; return; }
-        // The fingerprint of the shape: sums over every vertex of the contours in the box (cheap enough to
-        // run every frame; two steps of the morph move vertices, so they differ).
+        // A blank frame: no contour in a box in the middle of the map (cheap enough for every frame).
+        const box = [[x - 40, y - 40], [x + 40, y + 40]];
+        if (!ids.length || !map.queryRenderedFeatures(box, {layers: ids}).length) { probe.blank += 1; return; }
+        // Each new step on screen: fingerprint every contour drawn (all vertices, in the tile's own grid, which
+        // is what MapLibre draws), so a step that moved no vertex counts as no new shape.
+        const step = shown();
+        if (step === probe.last) return;
+        probe.last = step;
+        probe.steps.add(step);
         let sx = 0, sy = 0, n = 0;
-        for (const f of fs) {
+        for (const f of map.queryRenderedFeatures({layers: ids})) {
             const g = f.geometry;
             for (const line of g.type === 'LineString' ? [g.coordinates] : g.coordinates) {
                 for (const [a, b] of line) { n += 1; sx += a * n; sy += b * n; }
             }
         }
-        probe.shapes.add(`${fs.length}:${n}:${sx.toFixed(7)}:${sy.toFixed(7)}`);
-        probe.steps.add(shown());
+        probe.shapes.add(`${n}:${sx.toFixed(9)}:${sy.toFixed(9)}`);
     };
     map.on('render', probe.onRender);
     window.__probe = probe;

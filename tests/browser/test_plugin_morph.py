@@ -23,6 +23,7 @@ pytestmark = pytest.mark.browser
 
 STEPS = 32  # the plugin's default stepsPerZoom
 LAST_STEP = 11 + (STEPS - 1) / STEPS  # the wheel stops on the last step of level 11, short of 12
+MIN_SHAPES = 24  # distinct drawn geometries required over the 32 steps (see assert_morphed_through_the_level)
 WEB = REPO / "web"
 # A small map centred in one z11 tile of the sample (545/800): 32 steps of one tile stay quick on a busy
 # machine, and the view keeps that one tile from zoom 11 to 12.
@@ -52,10 +53,14 @@ def tile_of(url: str) -> tuple[int, int, int]:
 def assert_morphed_through_the_level(seen: dict[str, Any]) -> None:
     steps = seen["steps"]
     assert seen["frames"] > 0 and seen["blank"] == 0, seen
-    # Every step of the level was drawn (the start 11.0 and the 31 after it), each a different shape.
+    # Every one of the 32 steps of the level was on screen (the start 11.0 and the 31 after it) ...
     assert steps[0] == 11.0 and steps[-1] == LAST_STEP, steps
     assert len(steps) == STEPS, steps
-    assert seen["shapes"] >= STEPS, seen
+    # ... and the drawn geometry changed at nearly every one. Not at every one: on the sample the morph moves a
+    # vertex by at most 5 tile units (0.6 px) over the whole level, so two neighbouring steps can round to the
+    # same 1/16 px grid MapLibre draws on (over tile 11/545/800, the 32 steps give 29 distinct geometries).
+    print(f"distinct shapes drawn over the level: {seen['shapes']} of {len(steps)} steps")
+    assert seen["shapes"] >= MIN_SHAPES, seen
 
 
 def test_wheel_zoom_through_a_level_fetches_each_morph_tile_once(app):

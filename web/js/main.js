@@ -344,7 +344,8 @@ async function selectDataset(id, {fit = true} = {}) {
  * load or the service has no morph tiles for it; CCSM then falls back to the eighth-swap.
  */
 async function morphFor(id) {
-  if (!app.plugin) return null;
+  // ?morph=off keeps the eighth-swap for CCSM too (comparisons, bench/bench_morph.py).
+  if (!app.plugin || params.get('morph') === 'off') return null;
   let tilejson;
   try {
     const response = await fetch(`/morph/${encodeURIComponent(id)}/tilejson.json`);
