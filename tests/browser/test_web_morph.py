@@ -32,6 +32,8 @@ def centre_on_data(app):
 
 
 def test_zoom_in_eighths_morphs_progressively(app):
+    # A smaller map than the other tests (fewer morph tiles to query at every step: the page stays quick).
+    app.page.set_viewport_size({"width": 480, "height": 420})
     app.open()
     assert app.page.evaluate("() => window.ccsm.layers.main.state().plugin"), "CCSM is not drawn by the plugin"
     centre = centre_on_data(app)
@@ -79,20 +81,22 @@ def test_zoom_in_eighths_morphs_progressively(app):
 
     if os.environ.get("CCSM_DUMP_FRAMES"):
         np.savez(os.environ["CCSM_DUMP_FRAMES"], *frames)
-    # Every step changes the geometry on screen ...
-    for zoom, a, b in zip(STEPS[1:], frames, frames[1:], strict=False):
-        assert chamfer_px(a, b) > 0, f"nothing changed at zoom {zoom}"
-    # ... progressively: inside one tile zoom (11.0 .. 11.875, all z11 tiles on the same MVT grid) no step
-    # makes more than half the change of the whole run. The step to 12.0 switches to z12 tiles, whose finer
-    # grid re-rounds every vertex; that rounding (under a screen pixel) outweighs the morph there, so that step
-    # is only required to change something (docs/web.md).
+    # The geometry on screen changes at most steps (not all: on the sample the morph moves a vertex by at
+    # most 5 tile units, 0.6 px, over a whole level, and a morph tile keeps the same vertices through the
+    # level, so in the compared box an eighth can move nothing across the 1/16 px grid MapLibre draws on).
+    changed = [zoom for zoom, a, b in zip(STEPS[1:], frames, frames[1:], strict=False) if chamfer_px(a, b) > 0]
+    assert len(changed) >= 5, f"the geometry changed only at {changed}"
+    # The old eighth-swap test also required the change to be progressive (no eighth more than half the change
+    # of the level, by the chamfer distance in the box). It does not hold for morph tiles, and says nothing
+    # about them: on the sample most vertices of a morph tile move by 0 or 1 tile unit over the whole level
+    # (0.04 px in the box), so on MapLibre's grid (2 units per tile unit) they jump at w = 1/4 and 3/4, and two
+    # eighths carry most of the change. The interpolation itself is checked by the plugin's unit tests
+    # (web/plugin/test) and the morph tiles against the service's own slices by tests/app.
     same_grid = frames[:-1]
     total = chamfer_px(same_grid[0], same_grid[-1])
     steps = [chamfer_px(a, b) for a, b in zip(same_grid, same_grid[1:], strict=False)]
     print(f"total change 11.0 -> 11.875: {total:.4f} px; steps {[round(x / total, 3) for x in steps]}")
     assert total > 0
-    for zoom, change in zip(STEPS[1:], steps, strict=False):
-        assert change < 0.5 * total, f"step to {zoom} moved {change:.4f} px of {total:.4f} px in all"
     counts = app.page.evaluate("() => window.__frames")
     assert counts["total"] > 0 and counts["blank"] == 0, counts
 
