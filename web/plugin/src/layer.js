@@ -120,7 +120,7 @@ export class MorphLayer {
     } catch (err) {
       // "Style is not done loading": try again once it is.
       if (!/not done loading/i.test(err?.message ?? '')) throw err;
-      this.map.once('load', () => !this.removed && !this.active && this._start());
+      this.map.once('styledata', () => !this.removed && !this.active && this._start());
       return;
     }
     this.onChange(this.state());
