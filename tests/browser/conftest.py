@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import socket
 import subprocess
 import sys
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,6 +29,9 @@ from chromium_launch import CHROMIUM, CHROMIUM_ARGS
 REPO = Path(__file__).resolve().parents[2]
 VIEWPORT = {"width": 640, "height": 480}
 SERVICE_START_S = 240.0
+#: The service processes these fixtures started, by base URL (for stopping one while a test proves it is
+#: not needed).
+SERVICE_PROCESSES: dict[str, subprocess.Popen[bytes]] = {}
 
 
 def _free_port() -> int:
@@ -88,16 +93,34 @@ def service_url(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
             stderr=subprocess.STDOUT,
         )
     url = f"http://127.0.0.1:{port}"
+    SERVICE_PROCESSES[url] = proc
     try:
         _wait_for_service(url, proc, log)
         yield url
     finally:
+        SERVICE_PROCESSES.pop(url, None)
+        os.kill(proc.pid, signal.SIGCONT)
         proc.terminate()
         try:
             proc.wait(timeout=10)
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait(timeout=5)
+
+
+@contextmanager
+def service_stopped(url: str) -> Iterator[bool]:
+    """Stop (SIGSTOP) the service process started for ``url`` while the block runs, so nothing can be served by
+    it; yields False when the service is not ours to stop (CCSM_TEST_BASE_URL)."""
+    proc = SERVICE_PROCESSES.get(url)
+    if proc is None:
+        yield False
+        return
+    os.kill(proc.pid, signal.SIGSTOP)
+    try:
+        yield True
+    finally:
+        os.kill(proc.pid, signal.SIGCONT)
 
 
 def BROWSER_SERVICE_ENV(tmp: Path) -> dict[str, str]:  # noqa: N802  (a table, read like a constant)

@@ -1,10 +1,11 @@
-"""Continuous morphing: zoom in eighths, double-buffered sources, overtaken loads cancelled.
+"""Continuous morphing: CCSM through the ccsm-morph plugin (32 steps per zoom level from morph tiles fetched
+once), the baselines through the eighth-swap (double-buffered sources, overtaken loads cancelled).
 
 How the morph is measured (docs/web.md): the map is zoomed for real, 11.0, 11.125, ... 12.0, and after each
 step the contours on screen are read back with queryRenderedFeatures, whose coordinates are lon/lat. They are
 projected to Web Mercator pixels of one fixed reference zoom and compared inside one fixed geographic box (the
 view at zoom 12), so the map's own scaling changes nothing: only the contour geometry the service sent for the
-new ``zoom=`` moves the measure. The measure is a symmetric mean nearest-point distance between the two frames'
+new step moves the measure. The measure is a symmetric mean nearest-point distance between the two frames'
 densified lines (browser_geometry.chamfer_px), which grows with how far lines move.
 """
 
@@ -20,6 +21,7 @@ from browser_geometry import chamfer_px, frame_points, lonlat_to_px
 pytestmark = pytest.mark.browser
 
 STEPS = [11 + i / 8 for i in range(9)]
+PLUGIN_STEPS = 32  # the plugin's steps per zoom level (web/plugin, stepsPerZoom)
 
 
 def centre_on_data(app):
@@ -30,7 +32,10 @@ def centre_on_data(app):
 
 
 def test_zoom_in_eighths_morphs_progressively(app):
+    # A smaller map than the other tests (fewer morph tiles to query at every step: the page stays quick).
+    app.page.set_viewport_size({"width": 480, "height": 420})
     app.open()
+    assert app.page.evaluate("() => window.ccsm.layers.main.state().plugin"), "CCSM is not drawn by the plugin"
     centre = centre_on_data(app)
     # The compared box: the middle half of the view at zoom 12, the same ground at every step.
     app.jump(center=centre, zoom=12.0)
@@ -65,25 +70,33 @@ def test_zoom_in_eighths_morphs_progressively(app):
         app.wait_settled()
         assert app.page.evaluate("() => window.ccsm.layers.main.active.q") == zoom
         new_tiles = app.watch.tile_requests()[before:]
-        assert any(f"zoom={zoom:g}" in u or f"zoom={zoom}" in u for u in new_tiles), (zoom, new_tiles[:3])
+        # The plugin draws every step of a level from the morph tiles it already has: the steps inside the
+        # level ask for nothing, and no morph tile is ever fetched twice.
+        if 11 < zoom < 12:
+            assert new_tiles == [], (zoom, new_tiles[:3])
+        assert all("/morph/" in u for u in new_tiles), new_tiles[:3]
+        tiles = app.watch.tile_requests()
+        assert len(tiles) == len(set(tiles)), "a morph tile was fetched twice"
         frames.append(frame_points(app.rendered_lines(bbox=[w, s, e, n]), box))
 
     if os.environ.get("CCSM_DUMP_FRAMES"):
         np.savez(os.environ["CCSM_DUMP_FRAMES"], *frames)
-    # Every step changes the geometry on screen ...
-    for zoom, a, b in zip(STEPS[1:], frames, frames[1:], strict=False):
-        assert chamfer_px(a, b) > 0, f"nothing changed at zoom {zoom}"
-    # ... progressively: inside one tile zoom (11.0 .. 11.875, all z11 tiles on the same MVT grid) no step
-    # makes more than half the change of the whole run. The step to 12.0 switches to z12 tiles, whose finer
-    # grid re-rounds every vertex; that rounding (under a screen pixel) outweighs the morph there, so that step
-    # is only required to change something (docs/web.md).
+    # The geometry on screen changes at most steps (not all: on the sample the morph moves a vertex by at
+    # most 5 tile units, 0.6 px, over a whole level, and a morph tile keeps the same vertices through the
+    # level, so in the compared box an eighth can move nothing across the 1/16 px grid MapLibre draws on).
+    changed = [zoom for zoom, a, b in zip(STEPS[1:], frames, frames[1:], strict=False) if chamfer_px(a, b) > 0]
+    assert len(changed) >= 5, f"the geometry changed only at {changed}"
+    # The old eighth-swap test also required the change to be progressive (no eighth more than half the change
+    # of the level, by the chamfer distance in the box). It does not hold for morph tiles, and says nothing
+    # about them: on the sample most vertices of a morph tile move by 0 or 1 tile unit over the whole level
+    # (0.04 px in the box), so on MapLibre's grid (2 units per tile unit) they jump at w = 1/4 and 3/4, and two
+    # eighths carry most of the change. The interpolation itself is checked by the plugin's unit tests
+    # (web/plugin/test) and the morph tiles against the service's own slices by tests/app.
     same_grid = frames[:-1]
     total = chamfer_px(same_grid[0], same_grid[-1])
     steps = [chamfer_px(a, b) for a, b in zip(same_grid, same_grid[1:], strict=False)]
     print(f"total change 11.0 -> 11.875: {total:.4f} px; steps {[round(x / total, 3) for x in steps]}")
     assert total > 0
-    for zoom, change in zip(STEPS[1:], steps, strict=False):
-        assert change < 0.5 * total, f"step to {zoom} moved {change:.4f} px of {total:.4f} px in all"
     counts = app.page.evaluate("() => window.__frames")
     assert counts["total"] > 0 and counts["blank"] == 0, counts
 
@@ -99,7 +112,9 @@ def test_overtaken_loads_are_cancelled(app):
            window.__fetches = [];
            window.fetch = (input, init) => { window.__fetches.push(String(input)); return realFetch(input, init); };"""
     )
-    app.open()
+    # The eighth-swap (the baselines' mechanism): a load overtaken by the next eighth is cancelled. The plugin
+    # never needs this (its steps come from memory), so the test runs on Douglas–Peucker.
+    app.open("?method=dp")
     centre = centre_on_data(app)
     app.jump(center=centre, zoom=11.0)
     app.wait_settled()
@@ -169,8 +184,11 @@ def test_fly_to_keeps_contours_on_screen(app):
     app.wait_settled()
     assert app.page.evaluate("() => window.__blank") == 0
     state = app.page.evaluate("() => window.ccsm.layers.main.state()")
-    assert state["activeQ"] == 12.125
-    assert state["swaps"] - swaps_before >= 2, state
+    assert state["plugin"] and state["activeQ"] == int(12.2 * PLUGIN_STEPS) / PLUGIN_STEPS
+    # The eighth-swap test asked for two swaps here. The plugin swaps a step in only when all its tiles are in,
+    # and a flight across two levels keeps asking for new tiles, so on a slow machine (a few frames a second)
+    # the first complete step can be the last one: one swap is what is sure.
+    assert state["swaps"] - swaps_before >= 1, state
 
 
 def start_at_zoom_11_and_record_swaps(app) -> tuple[float, float]:
@@ -195,9 +213,9 @@ def start_at_zoom_11_and_record_swaps(app) -> tuple[float, float]:
     return box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
 
 
-def assert_morphed_through_eighths(app, min_zoom: float) -> None:
+def assert_morphed_through_steps(app, min_zoom: float) -> None:
     """After the gesture: zoomed past ``min_zoom``, never a frame without contours, and the geometry was
-    swapped at several intermediate eighths of a zoom level on the way."""
+    swapped at several intermediate steps (1/32 of a zoom level, the plugin's) on the way."""
     app.wait_settled()
     seen = app.page.evaluate(
         """() => ({zoom: window.ccsm.maps.a.getZoom(), blank: window.__gesture.blank,
@@ -205,22 +223,22 @@ def assert_morphed_through_eighths(app, min_zoom: float) -> None:
     )
     assert seen["zoom"] > min_zoom, seen
     assert seen["blank"] == 0 and seen["renders"] > 0, seen
-    eighths = sorted(q for q in seen["active"] if q is not None and 11.0 < q < seen["zoom"])
-    assert len(eighths) >= 3, seen
-    assert all(abs(q * 8 - round(q * 8)) < 1e-9 for q in eighths), eighths
+    steps = sorted(q for q in seen["active"] if q is not None and 11.0 < q < seen["zoom"])
+    assert len(steps) >= 3, seen
+    assert all(abs(q * PLUGIN_STEPS - round(q * PLUGIN_STEPS)) < 1e-9 for q in steps), steps
 
 
-def test_mouse_wheel_zoom_morphs_through_intermediate_eighths(app):
+def test_mouse_wheel_zoom_morphs_through_intermediate_steps(app):
     # Real wheel events from Playwright's mouse, as a user's scroll wheel sends them to the canvas.
     cx, cy = start_at_zoom_11_and_record_swaps(app)
     app.page.mouse.move(cx, cy)
     for _ in range(12):
         app.page.mouse.wheel(0, -40)
         app.page.wait_for_timeout(120)
-    assert_morphed_through_eighths(app, min_zoom=11.5)
+    assert_morphed_through_steps(app, min_zoom=11.5)
 
 
-def test_two_finger_pinch_morphs_through_intermediate_eighths(app):
+def test_two_finger_pinch_morphs_through_intermediate_steps(app):
     # A real two-finger touch gesture sent through Chromium's input pipeline (DevTools protocol), as a
     # phone or touch screen sends it; MapLibre's own touch handler turns it into zoom.
     cx, cy = start_at_zoom_11_and_record_swaps(app)
@@ -235,4 +253,4 @@ def test_two_finger_pinch_morphs_through_intermediate_eighths(app):
         cdp.send("Input.dispatchTouchEvent", {"type": "touchMove", "touchPoints": fingers(float(half_gap))})
         app.page.wait_for_timeout(60)
     cdp.send("Input.dispatchTouchEvent", {"type": "touchEnd", "touchPoints": []})
-    assert_morphed_through_eighths(app, min_zoom=12.0)
+    assert_morphed_through_steps(app, min_zoom=12.0)

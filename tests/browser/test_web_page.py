@@ -36,20 +36,34 @@ def test_everything_comes_from_the_service(app):
 
 
 def test_tile_urls_follow_the_tilejson_template(app):
+    # CCSM comes from the morph tiles' TileJSON (the plugin, once per tile, no zoom= parameter); the baselines
+    # from the per-level tiles' TileJSON with zoom= on the eighth grid and method=.
     app.open()
     dataset = app.page.evaluate("() => window.ccsm.state.datasetId")
     tilejson = httpx.get(f"{app.base_url}/tiles/{dataset}/tilejson.json").json()
-    template_path = httpx.URL(tilejson["tiles"][0]).path
-    prefix = template_path.split("{z}")[0]
+    morph_tilejson = httpx.get(f"{app.base_url}/morph/{dataset}/tilejson.json").json()
+    morph_prefix = httpx.URL(morph_tilejson["tiles"][0]).path.split("{z}")[0]
     tiles = app.watch.tile_requests()
     assert tiles
     for url in tiles:
+        assert httpx.URL(url).path.startswith(morph_prefix), url
+        assert "zoom" not in httpx.URL(url).params, url
+    assert len(tiles) == len(set(tiles)), "a morph tile was fetched twice"
+
+    before = len(app.watch.tile_requests())
+    app.page.select_option("#method", "dp")
+    app.wait_settled()
+    template_path = httpx.URL(tilejson["tiles"][0]).path
+    prefix = template_path.split("{z}")[0]
+    new = app.watch.tile_requests()[before:]
+    assert new
+    for url in new:
         u = httpx.URL(url)
         assert u.path.startswith(prefix), url
         z = int(re.search(r"/(\d+)/\d+/\d+\.mvt$", u.path).group(1))
         zoom = float(u.params["zoom"])
         assert z <= zoom < z + 1 and (zoom * 8).is_integer(), url
-        assert u.params["method"] == "ccsm"
+        assert u.params["method"] == "dp"
 
 
 def test_readout_shows_scale_and_t(app):

@@ -36,6 +36,10 @@ const app = {
     view: params.get('view') ?? 'single',
     t: params.has('t') ? Number(params.get('t')) : null,
   },
+  // The ccsm-morph plugin's module (null when it could not be loaded: CCSM then uses the eighth-swap), and
+  // the CcsmMorph of the dataset's morph tiles (null when the service has none for it).
+  plugin: null,
+  morph: null,
   errors: [], // every error text shown (window.ccsm.errors)
   maps: {a: null, b: null}, // b: the split view's second map, made when first needed
   layers: {main: null, overlay: null, split: null},
@@ -182,11 +186,12 @@ function applyView() {
   $('label-a').textContent = METHOD_NAMES[state.method];
   $('label-b').textContent = METHOD_NAMES[state.compare];
 
-  layers.main.setOptions({method: state.method, t: state.t});
+  const {morph} = app;
+  layers.main.setOptions({method: state.method, t: state.t, morph});
   if (layers.main.tilejson !== tj) layers.main.setDataset(tj);
 
   const overlayOn = state.view === 'overlay' && tj;
-  layers.overlay.setOptions({method: state.compare, t: state.t});
+  layers.overlay.setOptions({method: state.compare, t: state.t, morph});
   if (layers.overlay.tilejson !== (overlayOn ? tj : null)) layers.overlay.setDataset(overlayOn ? tj : null);
 
   const splitOn = state.view === 'split';
@@ -199,7 +204,7 @@ function applyView() {
     maps.b.resize();
     if (maps.b.isStyleLoaded()) {
       setExtent(maps.b, tj?.bounds);
-      layers.split.setOptions({method: state.compare, t: state.t});
+      layers.split.setOptions({method: state.compare, t: state.t, morph});
       const want = splitOn && tj ? tj : null;
       if (layers.split.tilejson !== want) layers.split.setDataset(want);
     }
@@ -317,6 +322,9 @@ async function selectDataset(id, {fit = true} = {}) {
     getJSON(tilejsonUrl(listed), `TileJSON of “${listed.name ?? id}”`),
   ]);
   if (!Array.isArray(tj.tiles) || !tj.tiles.length) throw new Error(`TileJSON of “${id}” lists no tiles URL`);
+  const morph = await morphFor(id);
+  if (app.morph) app.morph.teardownMaplibre(maplibregl);
+  app.morph = morph;
   state.datasetId = id;
   state.dataset = ds;
   state.tilejson = tj;
@@ -329,6 +337,25 @@ async function selectDataset(id, {fit = true} = {}) {
     else if (tj.center) mapA.jumpTo({center: [tj.center[0], tj.center[1]], zoom: tj.center[2] ?? 10});
   }
   applyView();
+}
+
+/**
+ * A CcsmMorph for the dataset's morph tiles (GET /morph/{id}/tilejson.json), or null when the plugin did not
+ * load or the service has no morph tiles for it; CCSM then falls back to the eighth-swap.
+ */
+async function morphFor(id) {
+  // ?morph=off keeps the eighth-swap for CCSM too (comparisons, bench/bench_morph.py).
+  if (!app.plugin || params.get('morph') === 'off') return null;
+  let tilejson;
+  try {
+    const response = await fetch(`/morph/${encodeURIComponent(id)}/tilejson.json`);
+    if (!response.ok) return null;
+    tilejson = await response.json();
+  } catch {
+    return null;
+  }
+  if (!Array.isArray(tilejson.tiles) || !tilejson.tiles.length) return null;
+  return new app.plugin.CcsmMorph({tilejson}).setupMaplibre(maplibregl);
 }
 
 async function handleFile(file) {
@@ -448,12 +475,21 @@ window.ccsm = {
     });
   },
   layerStates: () => layersInUse().map((l) => l.state()),
+  /** The CcsmMorph of the dataset (null: no morph tiles, or the plugin is not loaded). */
+  get morph() {
+    return app.morph;
+  },
 };
 
 // ---------------------------------------------------------------- start
 
 async function start() {
   installProtocol();
+  // The plugin is loaded on its own, so the page still works (with the eighth-swap) if it cannot be.
+  app.plugin = await import('ccsm-morph').catch((err) => {
+    console.warn('ccsm-morph did not load; CCSM uses the eighth-swap', err);
+    return null;
+  });
   try {
     app.maps.a = createMap('map-a');
   } catch (err) {

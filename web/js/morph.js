@@ -10,6 +10,10 @@
 // makes MapLibre abort its tile requests (our protocol's AbortController). A pending load that has been running
 // for MIN_PROGRESS_MS is allowed to finish first, so a long continuous gesture still shows intermediate shapes
 // instead of waiting for the gesture to end.
+//
+// CCSM with t following the zoom is drawn by the ccsm-morph plugin instead when the dataset has morph tiles
+// (setOptions({morph})): each morph tile is fetched once and the plugin draws 32 steps per zoom level from
+// memory (web/plugin/README.md). The eighth-swap above stays for the baselines and for a pinned t.
 
 import {clampMorphZoom, quantiseZoom} from './scale.js';
 import {registerSource, unregisterSource} from './protocol.js';
@@ -44,11 +48,14 @@ export class MorphingContours {
     this.method = 'ccsm';
     this.t = null; // null: the service picks t from the zoom (the morph); a number pins it
     this.override = null; // a fixed morph zoom (tests, debugging); null follows the map
-    this.active = null;
+    this._active = null;
     this.pending = null;
     this.swaps = 0;
     this.cancelled = 0;
     this._counter = 0;
+    this.morph = null; // a CcsmMorph of the dataset's morph tiles, or null
+    this._plugin = null; // the plugin's MorphLayer while it draws this layer
+    this._pluginSwaps = 0;
     this._handlers = {
       render: () => this.update(),
       idle: () => this._checkPending(),
@@ -66,13 +73,32 @@ export class MorphingContours {
     }
   }
 
+  /**
+   * What is on screen: {q, key, method, t, sourceId, layerIds} of the visible buffer (the eighth-swap's own,
+   * or the plugin's), or null.
+   */
+  get active() {
+    const p = this._plugin;
+    if (!p) return this._active;
+    if (!p.active) return null;
+    const q = p.shownZoom;
+    return {q, key: this.keyFor(q), method: 'ccsm', t: null, sourceId: p.active.sourceId, layerIds: p.visibleLayerIds};
+  }
+
+  /** True when the plugin draws this layer (CCSM following the zoom, and the dataset has morph tiles). */
+  get usesPlugin() {
+    return Boolean(this.morph && this.tilejson && this.method === 'ccsm' && this.t === null);
+  }
+
   /** The layer ids of the geometry currently on screen (for queryRenderedFeatures). */
   get visibleLayerIds() {
-    return this.active ? this.active.layerIds.filter((id) => this.map.getLayer(id)) : [];
+    const active = this.active;
+    return active ? active.layerIds.filter((id) => this.map.getLayer(id)) : [];
   }
 
   get desiredQ() {
     if (!this.tilejson) return null;
+    if (this._plugin) return this._plugin.desiredStep() / this.morph.stepsPerZoom;
     const q = this.override ?? quantiseZoom(this.map.getZoom());
     return clampMorphZoom(q, this.tilejson.minzoom ?? 0, this.tilejson.maxzoom ?? 22);
   }
@@ -82,28 +108,33 @@ export class MorphingContours {
   }
 
   setDataset(tilejson) {
+    this._removePlugin();
     this._removeBuffer(this.pending);
-    this._removeBuffer(this.active);
+    this._removeBuffer(this._active);
     this.pending = null;
-    this.active = null;
+    this._active = null;
     this.tilejson = tilejson;
     this.update();
   }
 
-  setOptions({method = this.method, t = this.t} = {}) {
+  setOptions({method = this.method, t = this.t, morph = this.morph} = {}) {
     this.method = method;
     this.t = t;
+    if (morph !== this.morph) this._removePlugin();
+    this.morph = morph;
     this.update();
   }
 
   setOverride(q) {
     this.override = q;
+    this._plugin?.setOverride(q);
     this.update();
   }
 
   /** True when what is on screen is what the current camera and options ask for. */
   get settled() {
-    return !this.tilejson || (!this.pending && this.active?.key === this.keyFor(this.desiredQ));
+    if (this.usesPlugin) return Boolean(this._plugin?.settled);
+    return !this.tilejson || (!this.pending && this._active?.key === this.keyFor(this.desiredQ));
   }
 
   state() {
@@ -112,7 +143,8 @@ export class MorphingContours {
       t: this.t,
       desiredQ: this.desiredQ,
       activeQ: this.active?.q ?? null,
-      pendingQ: this.pending?.q ?? null,
+      pendingQ: this._plugin ? this._plugin.state().pendingZoom : (this.pending?.q ?? null),
+      plugin: Boolean(this._plugin),
       swaps: this.swaps,
       cancelled: this.cancelled,
       settled: this.settled,
@@ -122,6 +154,11 @@ export class MorphingContours {
   /** Called every rendered frame: start loading a new buffer when the wanted key changes. */
   update() {
     if (!this.tilejson || !this._styleReady) return;
+    if (this.usesPlugin) {
+      if (!this._plugin) this._startPlugin();
+      return;
+    }
+    this._removePlugin();
     const q = this.desiredQ;
     const key = this.keyFor(q);
     if (this.pending) {
@@ -132,9 +169,55 @@ export class MorphingContours {
       this.pending = null;
       this.cancelled += 1;
     }
-    if (this.active?.key === key) return;
-    this.pending = this._addBuffer(q, key, !this.active);
+    if (this._active?.key === key) return;
+    this.pending = this._addBuffer(q, key, !this._active);
     this.onChange(this.state());
+  }
+
+  _startPlugin() {
+    // The eighth-swap's buffers go: the plugin draws from now on.
+    this._removeBuffer(this.pending);
+    this._removeBuffer(this._active);
+    this.pending = null;
+    this._active = null;
+    const dash = this.dasharray ? {'line-dasharray': this.dasharray} : {};
+    // A contour that appears inside a level (min_zoom) grows in: morph_fade runs from 0 to 1 over 1/8 level.
+    const width = (w) => ['*', w, ['coalesce', ['get', 'morph_fade'], 1]];
+    const base = {type: 'line', layout: {'line-join': 'round', 'line-cap': 'round'}};
+    const id = `${this.id}-src-ccsm`;
+    this._pluginSwaps = 0;
+    this._plugin = this.morph.addTo(this.map, {
+      id,
+      beforeId: this.beforeId,
+      layers: [
+        {
+          ...base,
+          id: `${id}-line`,
+          filter: ['!', ['to-boolean', ['get', 'index']]],
+          paint: {'line-color': this.color, 'line-width': width(0.8), ...dash},
+        },
+        {
+          ...base,
+          id: `${id}-index`,
+          filter: ['to-boolean', ['get', 'index']],
+          paint: {'line-color': this.color, 'line-width': width(1.8), ...dash},
+        },
+      ],
+      onChange: (s) => {
+        this.swaps += s.swaps - this._pluginSwaps;
+        this._pluginSwaps = s.swaps;
+        this.onChange(this.state());
+      },
+      onError: (message) => this.onError(message),
+    });
+    if (this.override !== null) this._plugin.setOverride(this.override);
+    this.onChange(this.state());
+  }
+
+  _removePlugin() {
+    if (!this._plugin) return;
+    this._plugin.remove();
+    this._plugin = null;
   }
 
   _addBuffer(q, key, firstBuffer) {
@@ -202,7 +285,7 @@ export class MorphingContours {
   }
 
   _onMapError(e) {
-    const buffers = [this.pending, this.active].filter(Boolean);
+    const buffers = [this.pending, this._active].filter(Boolean);
     if (e.sourceId && !buffers.some((b) => b.sourceId === e.sourceId)) return;
     if (!e.sourceId) return;
     const message = e.error?.message ?? String(e.error ?? 'tile error');
@@ -228,8 +311,8 @@ export class MorphingContours {
   _swap() {
     const p = this.pending;
     for (const id of p.layerIds) this.map.setPaintProperty(id, 'line-opacity', 1);
-    const old = this.active;
-    this.active = p;
+    const old = this._active;
+    this._active = p;
     this.pending = null;
     this._removeBuffer(old);
     this.swaps += 1;
@@ -238,17 +321,19 @@ export class MorphingContours {
     this.update();
   }
 
-  /** t of the features on screen (from the service's `t` field). */
+  /** t of the features on screen (from the service's `t` field, or the plugin's t at the drawn zoom). */
   visibleTStats() {
-    if (!this.active || !this.map.getSource(this.active.sourceId)) return null;
-    return tStats(this.map.querySourceFeatures(this.active.sourceId, {sourceLayer: SOURCE_LAYER}));
+    const active = this.active;
+    if (!active || !this.map.getSource(active.sourceId)) return null;
+    return tStats(this.map.querySourceFeatures(active.sourceId, {sourceLayer: SOURCE_LAYER}));
   }
 
   destroy() {
     for (const [name, fn] of Object.entries(this._handlers)) this.map.off(name, fn);
+    this._removePlugin();
     this._removeBuffer(this.pending);
-    this._removeBuffer(this.active);
+    this._removeBuffer(this._active);
     this.pending = null;
-    this.active = null;
+    this._active = null;
   }
 }
