@@ -18,7 +18,7 @@ from synthetic_rasters import fractal_heights, write_geotiff
 
 from engine.io.source import sample_contours_path
 from engine.serve.datasets import SourceSpec, build_dataset
-from engine.serve.renderer import Renderer
+from engine.serve.renderer import Renderer, TileOptions
 from engine.store.sqlite import CCSStore
 from engine.tiles.grid import tiles_covering
 from engine.types import Bounds
@@ -66,21 +66,25 @@ def interpolate(morph: dict, f: float, zoom: float) -> dict[int, list[np.ndarray
     return out
 
 
-def in_tile(parts: list[np.ndarray], margin: float = 0.0) -> shapely.Geometry:
+def in_tile(parts: list[np.ndarray], margin: float = 0.0, extent: int = EXTENT) -> shapely.Geometry:
     lines = shapely.multilinestrings([shapely.linestrings(p) for p in parts if len(p) >= 2])
-    return shapely.clip_by_rect(lines, -margin, -margin, EXTENT + margin, EXTENT + margin)
+    return shapely.clip_by_rect(lines, -margin, -margin, extent + margin, extent + margin)
 
 
-def farthest(a: shapely.Geometry, b: shapely.Geometry) -> float:
-    """How far any point of ``a`` lies from ``b`` (the directed Hausdorff distance, sampled every 2 units)."""
-    points = shapely.points(shapely.get_coordinates(shapely.segmentize(a, 2.0)))
+def farthest(a: shapely.Geometry, b: shapely.Geometry, step: float = 2.0) -> float:
+    """How far any point of ``a`` lies from ``b`` (the directed Hausdorff distance, sampled every ``step``)."""
+    points = shapely.points(shapely.get_coordinates(shapely.segmentize(a, step)))
     return float(shapely.distance(points, b).max()) if len(points) else 0.0
 
 
-def apart(a: list[np.ndarray], b: list[np.ndarray]) -> float:
+def apart(a: list[np.ndarray], b: list[np.ndarray], extent: int = EXTENT) -> float:
     """How far two drawings of a contour are apart inside the tile. Each side inside the tile is compared with
     the other clipped a little wider, so a line running along the tile's edge is not cut differently."""
-    return max(farthest(in_tile(a), in_tile(b, MARGIN)), farthest(in_tile(b), in_tile(a, MARGIN)))
+    wide, step = MARGIN * extent / EXTENT, 2.0 * extent / EXTENT
+    return max(
+        farthest(in_tile(a, 0, extent), in_tile(b, wide, extent), step),
+        farthest(in_tile(b, 0, extent), in_tile(a, wide, extent), step),
+    )
 
 
 def compare_level(renderer: Renderer, dataset: str, z: int, x: int, y: int) -> tuple[float, int]:
@@ -89,6 +93,7 @@ def compare_level(renderer: Renderer, dataset: str, z: int, x: int, y: int) -> t
     if result.data is None:
         return 0.0, 0
     morph = decode(result.data)
+    extent = renderer.options.extent
     worst, compared = 0.0, 0
     for f in FRACTIONS:
         zoom = z + f
@@ -99,16 +104,16 @@ def compare_level(renderer: Renderer, dataset: str, z: int, x: int, y: int) -> t
         }
         drawn = interpolate(morph, f, zoom)
         for fid, parts in served_lines.items():
-            want = in_tile(parts)
+            want = in_tile(parts, 0, extent)
             if want.is_empty:
                 continue
             assert fid in drawn, f"contour {fid} is served at zoom {zoom} but the morph tile does not draw it"
-            worst = max(worst, apart(drawn[fid], parts))
+            worst = max(worst, apart(drawn[fid], parts, extent))
             compared += 1
         for fid, parts in drawn.items():
-            got = in_tile(parts)
+            got = in_tile(parts, 0, extent)
             # A contour the morph draws inside the tile must be served too (a sliver along the edge aside).
-            if not got.is_empty and got.length > 2:
+            if not got.is_empty and got.length > 2 * extent / EXTENT:
                 assert fid in served_lines, f"the morph tile draws contour {fid} at zoom {zoom}; the service does not"
     return worst, compared
 
@@ -191,3 +196,18 @@ def test_a_level_that_generalizes_moves_its_vertices(sample_store: Path) -> None
         ):
             moved += 1
     assert moved > 10
+
+
+def test_on_a_sixteen_times_finer_grid_the_morph_still_matches(sample_store: Path) -> None:
+    # On the sample a vertex moves by about two units of a 4096 grid through a level, so a client that
+    # interpolated towards the wrong end (t7 instead of t8) would still pass above. On a 65536 grid the same
+    # mistake is four units off; the right geometry stays within one unit per coordinate.
+    store = CCSStore(sample_store)
+    renderer = Renderer(store, TileOptions(extent=16 * EXTENT, buffer_px=16 * 64))
+    info = store.dataset("sample")
+    worst, compared = 0.0, 0
+    for z in (10, 11):
+        w, n = compare_level(renderer, "sample", *tiles_near_centre(info.bounds_3857, z, 1)[0])
+        worst, compared = max(worst, w), compared + n
+    assert compared > 300
+    assert worst <= TOLERANCE, f"interpolated geometry is {worst:.2f} fine-grid units from the served slice"
