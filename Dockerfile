@@ -12,6 +12,12 @@ RUN python -m venv /opt/venv \
  && /opt/venv/bin/pip install --upgrade pip \
  && /opt/venv/bin/pip install .
 
+# --- web stage: the page's npm dependencies (MapLibre GL JS, the morph plugin's decoders) --------------------
+FROM node:20-slim AS web
+WORKDIR /web
+COPY web/package.json web/package-lock.json ./
+RUN npm ci --omit=dev --no-audit --no-fund
+
 # --- runtime stage -----------------------------------------------------------------------------------------
 FROM python:3.11-slim AS runtime
 ENV PATH=/opt/venv/bin:$PATH \
@@ -31,6 +37,7 @@ COPY --chown=ccsm:ccsm engine ./engine
 COPY --chown=ccsm:ccsm app ./app
 COPY --chown=ccsm:ccsm data/sample ./data/sample
 COPY --chown=ccsm:ccsm web ./web
+COPY --from=web --chown=ccsm:ccsm /web/node_modules ./web/node_modules
 USER ccsm
 VOLUME ["/data"]
 EXPOSE 8000

@@ -13,7 +13,7 @@ PORT ?= 8000
 # The browser tests launch this binary (tests/browser/chromium_launch.py); override only to test the check.
 CHROMIUM ?= /usr/bin/chromium
 PYTEST_ARGS ?=
-NPM_DIRS := $(wildcard web tests/app/node bench/geojsonvt)
+NPM_DIRS := $(wildcard web web/plugin tests/app/node bench/geojsonvt)
 
 .PHONY: run test install bench evaluate lint need-node need-chromium
 # Steps install system packages and share one venv: never run them side by side (make -j).
@@ -67,6 +67,7 @@ run: install
 # Tools are checked first, so a missing one stops make before the long install.
 test: need-node need-chromium install lint
 	cd web && npm run --if-present test
+	cd web/plugin && npm run --if-present test
 	$(BIN)/python -m pytest -q $(PYTEST_ARGS)
 
 bench: install

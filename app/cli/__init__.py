@@ -20,6 +20,7 @@ def _register_commands() -> None:
     # Each module adds its commands to ``app``; imported here so ``ccsm --help`` lists them all.
     from app.cli import (
         commands_engine,  # noqa: F401  simplify, evaluate
+        commands_export,  # noqa: F401  export
         commands_service,  # noqa: F401  serve, build
     )
 

@@ -288,7 +288,8 @@ class Renderer:
         if len(idx) == 0:
             return TileResult(None, 0, float(z), float(scales[0]))
         ts = np.stack([t_at_scales(info.ladder, pack.tables[idx], float(s)) for s in scales])  # (9, n)
-        drawn = self.methods["ccsm"].tile_lines(pack, idx, ts[0], float(scales[0]), TileContext(info, self, float(scales[-1])))
+        ctx = TileContext(info, self, level_end_scale=float(scales[-1]))
+        drawn = self.methods["ccsm"].tile_lines(pack, idx, ts[0], float(scales[0]), ctx)
         runs = runs_meeting(drawn, box)
         if runs is None:
             return TileResult(None, 0, float(z), float(scales[0]))

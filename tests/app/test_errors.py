@@ -4,6 +4,10 @@ import json
 
 import pytest
 
+from tests.app.conftest import LAT0, LON0, synthetic_features
+from tests.app.helpers import check_tile, tile_for
+from tests.app.test_datasets import wait_ready
+
 BAD_GETS = [
     ("/tiles/hills/17/0/0.mvt", 404, "zoom 17"),
     ("/tiles/hills/31/0/0.mvt", 422, "z"),
@@ -85,14 +89,46 @@ def test_bad_upload(client, body, status):
     assert set(r.json()) == {"error", "detail", "request_id"}
     assert_clean(r.text)
     assert client.get("/datasets").json() == before
-    assert client.get("/tiles/hills/12/1088/1598.mvt").status_code in (200, 204)
+    tile = client.get("/tiles/hills/{}/{}/{}.mvt".format(*tile_for(LON0, LAT0, 12)))
+    assert tile.status_code == 200 and len(check_tile(tile.content)) > 5  # hills is still served
 
 
-def test_bad_upload_parameters(client):
-    r = client.post("/datasets?source_scale=100000&target_scale=50000", content=b"{}")
-    assert r.status_code in (400, 422)
-    r = client.post("/datasets?id=Bad%20Id", content=b"{}")
-    assert r.status_code == 422
+#: A valid upload: only the query parameters can make it fail.
+GOOD_UPLOAD = json.dumps({"type": "FeatureCollection", "features": synthetic_features(seed=5)[:3]}).encode()
+
+
+@pytest.mark.parametrize(
+    ("query", "status", "names"),
+    [
+        ("source_scale=100000&target_scale=50000", 400, "target_scale"),
+        ("source_scale=600000", 400, "source_scale"),  # above the default target scale, 1:500,000
+        ("source_scale=-5", 422, "source_scale"),
+        ("target_scale=nan", 422, "target_scale"),
+        ("interval=0", 422, "interval"),
+        ("id=Bad%20Id", 422, "id"),
+    ],
+)
+def test_bad_upload_parameters(client, query, status, names):
+    before = client.get("/datasets").json()
+    r = client.post(f"/datasets?{query}", content=GOOD_UPLOAD, headers={"content-type": "application/geo+json"})
+    assert r.status_code == status, r.text
+    body = r.json()
+    assert set(body) == {"error", "detail", "request_id"}
+    assert names in json.dumps(body["detail"]), body
+    assert_clean(r.text)
+    assert client.get("/datasets").json() == before
+
+
+def test_good_upload_parameters_are_accepted(client):
+    # The control of test_bad_upload_parameters: the same body with valid parameters is accepted.
+    r = client.post(
+        "/datasets?id=good&source_scale=100000&target_scale=400000",
+        content=GOOD_UPLOAD,
+        headers={"content-type": "application/geo+json"},
+    )
+    assert r.status_code == 202, r.text
+    scales = wait_ready(client, "good")["scales"]
+    assert (scales["source_scale"], scales["target_scale"]) == (100000.0, 400000.0)
 
 
 def test_internal_error_is_generic(client, monkeypatch):

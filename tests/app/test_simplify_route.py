@@ -1,8 +1,10 @@
 import math
 
 import numpy as np
+import pyproj
 import pytest
 
+from engine.baselines import simplify_at_scale
 from engine.tiles.scale import scale_for_zoom
 from tests.app.conftest import LAT0, LON0
 
@@ -60,3 +62,25 @@ def test_half_zoom_lies_between_in_similarity(client, method):
 def test_original_similarity_is_one(client):
     feats = client.get("/simplify?scale=300000&method=original").json()["features"]
     assert feats and all(math.isclose(f["properties"]["similarity"], 1.0) for f in feats)
+
+
+@pytest.mark.parametrize("method", ["dp", "wm", "vw", "original"])
+def test_each_method_returns_its_own_simplification(client, method):
+    scale = 250_000.0
+    store = client.app.state.service.store
+    to_lonlat = pyproj.Transformer.from_crs(store.dataset("hills").working_crs, "EPSG:4326", always_xy=True)
+    # The service runs the baselines at the scale rounded to 1/16 of a zoom level (its cache step).
+    snapped = 2.0 ** (round(math.log2(scale) * 16) / 16)
+    feats = client.get(f"/simplify?scale={scale}&method={method}").json()["features"]
+    assert len(feats) > 5
+    recs = {r.fid: r for r in store.load([f["id"] for f in feats])}
+    fewer = 0
+    for f in feats:
+        rec = recs[f["id"]]
+        own = rec.original_w if method == "original" else simplify_at_scale(method, rec.original_w, rec.closed, snapped)
+        own = np.vstack([own, own[:1]]) if rec.closed else own
+        got = np.array(f["geometry"]["coordinates"])
+        assert got.shape == own.shape, (f["id"], got.shape, own.shape)
+        assert np.abs(got - np.column_stack(to_lonlat.transform(own[:, 0], own[:, 1]))).max() < 1e-6
+        fewer += len(own) < len(rec.original_w) + rec.closed
+    assert (fewer > 0) == (method != "original")

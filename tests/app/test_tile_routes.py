@@ -1,12 +1,17 @@
 import gzip
+import math
 
 import numpy as np
+import pyproj
 import pytest
 import shapely
 
+from engine.baselines import simplify_at_scale
+from engine.serve.datasets import SourceSpec, build_dataset
+from engine.store.sqlite import CCSStore
 from engine.tiles.scale import zoom_for_scale
-from tests.app.conftest import LAT0, LON0
-from tests.app.helpers import check_tile, decode, grid_to_lonlat, lines_of, tile_for
+from tests.app.conftest import LAT0, LON0, synthetic_features, write_geojson
+from tests.app.helpers import BUFFER, EXTENT, check_tile, decode, grid_to_lonlat, lines_of, tile_for
 
 MVT = "application/vnd.mapbox-vector-tile"
 
@@ -48,6 +53,24 @@ def test_etag_304(client):
     assert again.headers["etag"] == r.headers["etag"]
     other = client.get(path + "?zoom=12.5", headers={"if-none-match": r.headers["etag"]})
     assert other.status_code == 200
+
+
+def test_etag_changes_with_the_data_version(client, tmp_path):
+    path = url(*tile_for(LON0, LAT0, 12))
+    old = client.get(path)
+    version = client.get("/tiles/hills/tilejson.json").json()["data_version"]
+    # Rebuild 'hills' from changed contours, through another handle on the store (as `ccsm build` would).
+    changed = write_geojson(tmp_path / "hills.geojson", synthetic_features(seed=8))
+    store = CCSStore(client.app.state.service.store.path)
+    info, rebuilt = build_dataset(store, SourceSpec(changed, "hills", "hills"), workers=1)
+    assert rebuilt and info.data_version > version
+    tj = client.get("/tiles/hills/tilejson.json").json()
+    assert tj["data_version"] == info.data_version and f"v={info.data_version}" in tj["tiles"][0]
+    new = client.get(path, headers={"if-none-match": old.headers["etag"]})
+    assert new.status_code == 200, "a stale ETag must not get a 304"
+    assert new.headers["etag"] != old.headers["etag"]
+    assert new.content != old.content and check_tile(new.content)
+    assert client.get(path, headers={"if-none-match": new.headers["etag"]}).status_code == 304
 
 
 def test_cors_on_get(client):
@@ -113,6 +136,88 @@ def test_every_method_renders(client, method):
     assert check_tile(r.content)
 
 
+WEB_MERCATOR_HALF = 20037508.342789244
+
+
+def tile_bounds_3857(z, x, y):
+    size = 2 * WEB_MERCATOR_HALF / 2**z
+    return -WEB_MERCATOR_HALF + x * size, WEB_MERCATOR_HALF - (y + 1) * size, size
+
+
+def own_line(method, rec, t, scale, to_3857):
+    """The method's own line of a stored contour (EPSG:3857), computed here from the stored rows."""
+    if method == "ccsm":
+        return (1 - t) * rec.base + t * rec.top
+    if method == "original":
+        return rec.original
+    # The service caches baselines per 1/16 of a zoom level: it runs them at the scale rounded to that step.
+    snapped = 2.0 ** (round(math.log2(scale) * 16) / 16)
+    line = np.asarray(simplify_at_scale(method, rec.original_w, rec.closed, snapped))
+    return to_3857(np.vstack([line, line[:1]]) if rec.closed else line)
+
+
+def feature_points(feature):
+    return np.array([p for line in lines_of(feature["geometry"]) for p in line], dtype=float)
+
+
+@pytest.mark.parametrize("zoom", [11, 12])
+def test_each_method_draws_its_own_simplification(client, zoom):
+    """Each method's tile is that method's own line of every contour, quantised to the tile grid: a router that
+    served one method for another fails here."""
+    z, x, y = tile_for(LON0 + 0.01, LAT0, zoom)
+    minx, miny, size = tile_bounds_3857(z, x, y)
+    k = EXTENT / size
+    store = client.app.state.service.store
+    info = store.dataset("hills")
+    tr = pyproj.Transformer.from_crs(info.working_crs, "EPSG:3857", always_xy=True)
+
+    def to_3857(xy):
+        return np.column_stack(tr.transform(xy[:, 0], xy[:, 1]))
+
+    lat = grid_to_lonlat(z, x, y, EXTENT / 2, EXTENT / 2)[1]
+    scale = 279_541_132.014 * math.cos(math.radians(lat)) / 2**zoom
+    drawn = {}
+    for method in ("ccsm", "dp", "wm", "vw", "original"):
+        r = client.get(url(z, x, y, f"method={method}"))
+        assert r.status_code == 200
+        assert float(r.headers["x-tile-scale"]) == pytest.approx(scale, rel=1e-6)
+        feats = check_tile(r.content)
+        assert len(feats) > 5
+        recs = {rec.fid: rec for rec in store.load([f["id"] for f in feats])}
+        drawn[method] = {}
+        for f in feats:
+            rec = recs[f["id"]]
+            assert f["properties"]["elevation"] == rec.elevation
+            line = own_line(method, rec, f["properties"]["t"], scale, to_3857)
+            expected = np.column_stack([np.rint((line[:, 0] - minx) * k), np.rint((miny + size - line[:, 1]) * k)])
+            got = feature_points(f)
+            drawn[method][f["id"]] = got
+            on_edge = ((got == -BUFFER) | (got == EXTENT + BUFFER)).any(axis=1)
+            vertices = got[~on_edge]  # the others are where clipping cut the line at the buffer's edge
+            # every drawn vertex is a vertex of the method's own line ...
+            gap = np.abs(vertices[:, None, :] - expected[None, :, :]).max(axis=2).min(axis=1)
+            assert gap.max() <= 1, (method, f["id"], gap.max())
+            # ... and every vertex of that line inside the tile lies on the drawn line (rows thinned away by
+            # significance move it by under half a grid unit, rounding by another).
+            inside = expected[((expected >= 0) & (expected <= EXTENT)).all(axis=1)]
+            parts = shapely.MultiLineString([line for line in lines_of(f["geometry"])])
+            if len(inside):
+                far = shapely.distance(parts, shapely.points(inside)).max()
+                assert far <= 1.5, (method, f["id"], far)
+            if method in ("dp", "wm", "vw"):  # baselines keep every row: exactly the line's vertices
+                in_buffer = expected[((expected > -BUFFER) & (expected < EXTENT + BUFFER)).all(axis=1)]
+                assert {tuple(p) for p in vertices} == {tuple(p) for p in in_buffer}, (method, f["id"])
+    # The methods differ in this tile, so the five tiles differ.
+    names = list(drawn)
+    for i, a in enumerate(names):
+        for b in names[i + 1 :]:
+            common = set(drawn[a]) & set(drawn[b])
+            assert any(
+                drawn[a][fid].shape != drawn[b][fid].shape or (drawn[a][fid] != drawn[b][fid]).any()
+                for fid in common
+            ), (a, b)
+
+
 def test_small_contours_vanish(client):
     """At a small scale the smallest rings are gone; at the source scale they are all there."""
     total = client.get("/datasets/hills").json()["counts"]["contours"]
@@ -123,16 +228,18 @@ def test_small_contours_vanish(client):
 
 
 def test_feature_ids_stable_across_zooms(client):
-    a = {
+    parent = {
         f["id"]: f["properties"]["elevation"]
         for f in check_tile(client.get(url(*tile_for(LON0, LAT0, 12))).content)
     }
-    b = {
+    child = {
         f["id"]: f["properties"]["elevation"]
         for f in check_tile(client.get(url(*tile_for(LON0, LAT0, 13))).content)
     }
-    for fid in set(a) & set(b):
-        assert a[fid] == b[fid]
+    # The z13 tile lies inside the z12 one: the contours it shows are the parent's, under the same ids.
+    shared = set(parent) & set(child)
+    assert len(child) > 5 and len(shared) >= 0.8 * len(child), (sorted(parent), sorted(child))
+    assert all(parent[fid] == child[fid] for fid in shared)
 
 
 def test_tilejson(client):
@@ -152,6 +259,14 @@ def test_tilejson(client):
 
 
 def test_raw_gzip_bytes_are_valid(client):
-    r = client.get(url(*tile_for(LON0, LAT0, 13)), headers={"accept-encoding": "gzip"})
-    raw = r.extensions.get("raw")  # not exposed by TestClient; decompress what httpx gives
-    assert raw is None or gzip.decompress(raw)
+    path = url(*tile_for(LON0, LAT0, 13))
+    # iter_raw gives the body as sent, before httpx's lenient decoder (which ignores a missing gzip trailer).
+    with client.stream("GET", path, headers={"accept-encoding": "gzip"}) as r:
+        raw = b"".join(r.iter_raw())
+    assert r.status_code == 200 and r.headers["content-encoding"] == "gzip"
+    assert int(r.headers["content-length"]) == len(raw)
+    assert raw[:2] == b"\x1f\x8b"
+    body = gzip.decompress(raw)  # strict: checks the CRC and length trailer
+    plain = client.get(path, headers={"accept-encoding": "identity"})
+    assert body == plain.content
+    assert len(check_tile(body)) > 5

@@ -101,29 +101,65 @@ def test_zoom_in_eighths_morphs_progressively(app):
     assert counts["total"] > 0 and counts["blank"] == 0, counts
 
 
+#: The morph levels overtaken in test_overtaken_loads_are_cancelled (the view stops at 11.625).
+OVERTAKEN = {"11.125", "11.25", "11.375", "11.5"}
+
+
 def test_overtaken_loads_are_cancelled(app):
+    # Record the tile fetches the page starts, so each step can wait until its load is in flight.
+    app.page.add_init_script(
+        """const realFetch = window.fetch;
+           window.__fetches = [];
+           window.fetch = (input, init) => { window.__fetches.push(String(input)); return realFetch(input, init); };"""
+    )
     # The eighth-swap (the baselines' mechanism): a load overtaken by the next eighth is cancelled. The plugin
     # never needs this (its steps come from memory), so the test runs on Douglas–Peucker.
     app.open("?method=dp")
     centre = centre_on_data(app)
     app.jump(center=centre, zoom=11.0)
     app.wait_settled()
-    before = app.page.evaluate("() => window.ccsm.layers.main.cancelled")
-    # Five eighths in five frames: each new step overtakes the load of the one before.
+    held = []
+
+    def hold_overtaken(route):
+        if httpx.URL(route.request.url).params.get("zoom") in OVERTAKEN:
+            held.append(route)  # left unanswered: the load stays in flight until the page gives it up
+        else:
+            route.continue_()
+
+    app.page.route("**/*.mvt*", hold_overtaken)
+    # Five eighths, each as soon as the previous one's tiles are being fetched (those of the last, 11.625, are not
+    # held). The page lets a load older than
+    # MIN_PROGRESS_MS finish instead of overtaking it; its clock is held still so that no load gets that old
+    # on a slow machine.
     app.page.evaluate(
         """async (centre) => {
             const m = window.ccsm.maps.a;
-            for (let i = 1; i <= 5; i++) {
-                m.jumpTo({center: centre, zoom: 11 + i / 8});
-                await new Promise(r => requestAnimationFrame(r));
+            const fetching = (q) => window.__fetches.some(
+                (u) => new URL(u, location.href).searchParams.get('zoom') === String(q));
+            const realNow = performance.now, still = performance.now();
+            performance.now = () => still;
+            try {
+                for (let i = 1; i <= 5; i++) {
+                    const q = 11 + i / 8, since = Date.now();
+                    m.jumpTo({center: centre, zoom: q});
+                    while (!fetching(q) && Date.now() - since < 30000)
+                        await new Promise((r) => requestAnimationFrame(r));
+                }
+            } finally {
+                performance.now = realNow;
             }
         }""",
         centre,
     )
+    for route in held:
+        route.continue_()  # a no-op for the requests the page aborted
+    app.page.unroute("**/*.mvt*")
     app.wait_settled()
-    state = app.page.evaluate("() => window.ccsm.layers.main.state()")
-    assert state["activeQ"] == 11.625
-    assert state["cancelled"] > before, state
+    assert app.page.evaluate("() => window.ccsm.layers.main.state().activeQ") == 11.625
+    # Playwright saw every overtaken level's tile requests abort, and only those.
+    held_urls = sorted(r.request.url for r in held)
+    assert {httpx.URL(u).params["zoom"] for u in held_urls} == OVERTAKEN, held_urls
+    assert sorted(app.watch.aborted_tiles) == held_urls
 
 
 def test_fly_to_keeps_contours_on_screen(app):

@@ -83,6 +83,8 @@ def test_hover_shows_elevation_and_t(app):
     app.open()
     app.jump(zoom=11.5)
     app.wait_settled()
+    # A contour vertex in the middle of the map with no other contour within 6 px, so that the tooltip (which
+    # looks 4 px around the mouse) can only describe this contour.
     point = app.page.evaluate(
         """() => {
             const l = window.ccsm.layers.main, m = l.map;
@@ -90,20 +92,29 @@ def test_hover_shows_elevation_and_t(app):
             const fs = m.queryRenderedFeatures(
                 [[c.width * 0.3, c.height * 0.3], [c.width * 0.7, c.height * 0.7]], {layers: l.visibleLayerIds});
             for (const f of fs) {
-                const line = f.geometry.type === 'LineString' ? f.geometry.coordinates : f.geometry.coordinates[0];
-                for (const [lng, lat] of line) {
+                const lines = f.geometry.type === 'LineString' ? [f.geometry.coordinates] : f.geometry.coordinates;
+                for (const [lng, lat] of lines.flat()) {
                     const p = m.project([lng, lat]);
-                    if (p.x > c.width * 0.3 && p.x < c.width * 0.7 && p.y > c.height * 0.3 && p.y < c.height * 0.7)
-                        return {x: c.left + p.x, y: c.top + p.y, elevation: f.properties.elevation};
+                    if (!(p.x > c.width * 0.3 && p.x < c.width * 0.7 && p.y > c.height * 0.3 && p.y < c.height * 0.7))
+                        continue;
+                    const near = m.queryRenderedFeatures([[p.x - 6, p.y - 6], [p.x + 6, p.y + 6]],
+                                                         {layers: l.visibleLayerIds});
+                    const kinds = new Set(near.map(g => `${g.properties.elevation}|${g.properties.t}`));
+                    if (near.length && kinds.size === 1)
+                        return {x: c.left + p.x, y: c.top + p.y, elevation: near[0].properties.elevation,
+                                t: near[0].properties.t, index: near[0].properties.index};
                 }
             }
             return null;
         }"""
     )
-    assert point, "no contour vertex in the middle of the map"
+    assert point, "no contour vertex standing alone in the middle of the map"
     app.page.mouse.move(point["x"] + 20, point["y"] + 20)
     app.page.mouse.move(point["x"], point["y"])
     app.wait_until("() => !document.getElementById('tooltip').hidden", what="tooltip")
     text = app.page.locator("#tooltip").inner_text()
-    assert re.search(r"-?\d+(\.\d)? m", text), text
-    assert re.search(r"t = \d\.\d{3}", text), text
+    shown = re.search(r"(-?\d+(?:\.\d)?) m(?: \(index\))? · t = (\d\.\d{3})", text)
+    assert shown, text
+    assert float(shown.group(1)) == pytest.approx(point["elevation"], abs=0.05), (text, point)
+    assert float(shown.group(2)) == pytest.approx(point["t"], abs=0.0005 + 1e-9), (text, point)  # 3 decimals
+    assert ("(index)" in text) == bool(point["index"]), (text, point)

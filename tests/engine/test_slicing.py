@@ -9,7 +9,15 @@ from numpy.testing import assert_allclose
 from trimesh.intersections import mesh_plane
 
 from engine.ccsm.ccs import CCS, build_ccs
-from engine.ccsm.slicing import ccs_mesh, check_t, section_with_trimesh, slice_rows
+from engine.ccsm.slicing import (
+    MAX_MESH_ROWS,
+    MESH_DEVIATION_M,
+    ccs_mesh,
+    check_t,
+    mesh_rows,
+    section_with_trimesh,
+    slice_rows,
+)
 from engine.errors import InvalidParameter
 from engine.params import BuildParams
 from engine.types import Contour
@@ -135,14 +143,20 @@ def test_section_with_trimesh_returns_the_section_of_an_open_line(line_ccs: CCS)
 
 @pytest.mark.parametrize("t", [0.0137, 0.5003, 0.9871])
 @pytest.mark.parametrize("shape", ["ring", "line"])
-def test_slice_matches_trimesh_section_of_the_default_mesh_within_5_cm_strictly_inside(
+def test_slice_matches_trimesh_section_of_the_default_mesh_within_1_cm_or_the_capped_twist(
     t: float, shape: str, ring_ccs: CCS, line_ccs: CCS
 ) -> None:
     ccs = ring_ccs if shape == "ring" else line_ccs
     sections = section_with_trimesh(ccs.mesh(), t)
     assert len(sections) == 1
     ours = shapely.LineString(slice_rows(ccs.base, ccs.top, t))
-    assert shapely.hausdorff_distance(shapely.LineString(sections[0]), ours) < 0.05
+    distance = shapely.hausdorff_distance(shapely.LineString(sections[0]), ours)
+    rows = mesh_rows(ccs.base, ccs.top)
+    if rows < MAX_MESH_ROWS:
+        assert distance <= MESH_DEVIATION_M
+    else:  # the ring's mesh hits the row cap: its twist may exceed 1 cm (1.1 cm at t = 0.5003)
+        assert distance <= twist_bound(ccs.base, ccs.top, t, rows) + 1e-9
+        assert distance <= 0.012
 
 
 def test_ccs_mesh_has_the_rows_as_vertices_and_heights_as_z(ring_ccs: CCS) -> None:

@@ -1,3 +1,7 @@
+import dataclasses
+import math
+import sqlite3
+
 import numpy as np
 import pytest
 
@@ -58,22 +62,37 @@ def test_unchanged_source_is_not_rebuilt_changed_one_is(store, src, tmp_path):
 def test_failed_write_rolls_back(store, src, monkeypatch):
     before = store.dataset("h")
     fids = store.all_fids("h")
-    import engine.serve.records as mod
+    recs = store.load(fids)
+    import engine.serve.datasets as datasets
 
-    calls = {"n": 0}
-    real = mod.row_significance
+    real_rows = datasets.contour_rows
 
-    def flaky(*a):
-        calls["n"] += 1
-        if calls["n"] > 6:
-            raise RuntimeError("disk on fire")
-        return real(*a)
+    def rows_with_a_bad_sixth(*a):
+        rows = real_rows(*a)
+        # SQLite stores a NaN as NULL: the NOT NULL elevation makes the sixth contour's INSERT fail.
+        rows[5] = dataclasses.replace(rows[5], elevation=math.nan)
+        return rows
 
-    monkeypatch.setattr(mod, "row_significance", flaky)
-    with pytest.raises(RuntimeError):
+    monkeypatch.setattr(datasets, "contour_rows", rows_with_a_bad_sixth)
+    statements: list[str] = []
+    store._con().set_trace_callback(statements.append)
+    with pytest.raises(sqlite3.IntegrityError, match="NOT NULL"):
         build_dataset(store, SourceSpec(src, "h", "h", source_scale=40_000), workers=1)
-    assert store.dataset("h").data_version == before.data_version
-    assert store.all_fids("h") == fids
+    store._con().set_trace_callback(None)
+    # The failure came inside the write: old rows deleted, new ones inserted, then rolled back.
+    begin = statements.index("BEGIN IMMEDIATE")
+    inside = statements[begin:]
+    assert any(q.startswith("DELETE FROM contours") for q in inside)
+    assert sum(q.startswith("INSERT INTO contours") for q in inside) == 6
+    assert inside[-1] == "ROLLBACK"
+    for reader in (store, CCSStore(store.path)):
+        info = reader.dataset("h")
+        assert (info.data_version, info.source_hash) == (before.data_version, before.source_hash)
+        assert reader.all_fids("h") == fids
+        assert len(reader.query("h", info.bounds_3857)) == len(fids)
+        for old, new in zip(recs, reader.load(fids), strict=True):
+            assert np.array_equal(old.base, new.base) and np.array_equal(old.original, new.original)
+        assert reader.integrity_ok()
 
 
 def test_rollback_inside_the_transaction(store):
@@ -113,6 +132,6 @@ def test_packed_tiles_equal_contour_by_contour(store):
             for kw in ({}, {"t": 0.5}, {"method": "original"}):
                 a = packed.tile("h", *tile, **kw)
                 b = by_contour.tile("h", *tile, **kw)
-                assert (a.data is None) == (b.data is None) and a.features == b.features
+                assert a.data == b.data and a.features == b.features
                 n += a.features
     assert n > 0

@@ -20,6 +20,10 @@ from engine.ccsm.surface import (
 from engine.errors import SurfaceFitError
 
 ORIGIN = np.array([750_000.0, 4_060_000.0])
+#: Agreement with geomdl at UTM coordinates, where one unit in the last place is 4.7e-10 m: measured at most
+#: 6.5e-9 m on the surface and 2.8e-8 m on the control points over 7,500 random inputs (the README's 1e-8 m).
+SURFACE_ATOL = 1e-8
+CTRLPTS_ATOL = 5e-8
 
 
 def open_samples(seed: int, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -56,7 +60,7 @@ def test_surface_evaluates_like_geomdls_interpolated_surface(seed: int, n: int) 
     us = np.linspace(0.0, 1.0, 17)
     for v in np.linspace(0.0, 1.0, 7):
         expected = np.array([oracle.evaluate_single((float(u), float(v))) for u in us])
-        assert_allclose(fitted.evaluate(us, v), expected, rtol=0, atol=1e-6)
+        assert_allclose(fitted.evaluate(us, v), expected, rtol=0, atol=SURFACE_ATOL)
 
 
 @pytest.mark.parametrize(("seed", "n"), [(4, 8), (5, 30)])
@@ -68,7 +72,7 @@ def test_to_geomdl_reproduces_geomdls_control_points_and_knots(seed: int, n: int
         oracle.ctrlpts_size_u,
         oracle.ctrlpts_size_v,
     )
-    assert_allclose(exported.ctrlpts, oracle.ctrlpts, rtol=0, atol=1e-6)
+    assert_allclose(exported.ctrlpts, oracle.ctrlpts, rtol=0, atol=CTRLPTS_ATOL)
     assert_allclose(exported.knotvector_u, oracle.knotvector_u, rtol=0, atol=1e-12)
     assert_allclose(exported.knotvector_v, oracle.knotvector_v, rtol=0, atol=1e-12)
 
@@ -98,12 +102,14 @@ def test_wireframe_rows_are_evenly_spaced_on_each_link() -> None:
 @settings(deadline=None, max_examples=40)
 def test_surface_is_ruled_with_height_equal_to_v(seed: int, n: int, u: float, v: float) -> None:
     initial, target = open_samples(seed, n)
-    fitted = fit_surface(initial, target, closed=False)
-    uu = np.array([u])
-    point = fitted.evaluate(uu, v)[0]
+    oracle = geomdl_surface(initial, target)
+    point = fit_surface(initial, target, closed=False).evaluate(np.array([u]), v)[0]
+    expected = np.array(oracle.evaluate_single((u, v)))
     assert point[2] == v
-    expected_xy = (1.0 - v) * fitted.evaluate(uu, 0.0)[0, :2] + v * fitted.evaluate(uu, 1.0)[0, :2]
-    assert_allclose(point[:2], expected_xy, rtol=0, atol=1e-6)
+    assert_allclose(point, expected, rtol=0, atol=SURFACE_ATOL)
+    # geomdl's own surface is ruled, at height v: its point lies between its boundary points at u.
+    lo, hi = np.array(oracle.evaluate_single((u, 0.0))), np.array(oracle.evaluate_single((u, 1.0)))
+    assert_allclose(expected, (1.0 - v) * lo + v * hi, rtol=0, atol=SURFACE_ATOL)
 
 
 @pytest.mark.parametrize("closed", [False, True])
@@ -112,7 +118,7 @@ def test_surface_passes_through_every_data_point_at_its_parameter(closed: bool) 
     fitted = fit_surface(initial, target, closed=closed)
     grid = wireframe(initial, target)
     for row, h in enumerate(WIREFRAME_HEIGHTS):
-        assert_allclose(fitted.evaluate(fitted.params, h), grid[row], rtol=0, atol=1e-6)
+        assert_allclose(fitted.evaluate(fitted.params, h), grid[row], rtol=0, atol=SURFACE_ATOL)
 
 
 def test_ring_surface_is_closed_and_c2_at_the_seam() -> None:
@@ -174,7 +180,7 @@ def test_geomdl_boundary_curves_are_the_surface_at_heights_0_and_1() -> None:
     surface = fit_surface(initial, target, closed=False)
     base, top = surface.curves_to_geomdl()
     u = np.linspace(0.0, 1.0, 41)
-    assert_allclose(np.array(base.evaluate_list(list(u))), surface.evaluate(u, 0.0)[:, :2], atol=1e-6)
-    assert_allclose(np.array(top.evaluate_list(list(u))), surface.evaluate(u, 1.0)[:, :2], atol=1e-6)
+    assert_allclose(np.array(base.evaluate_list(list(u))), surface.evaluate(u, 0.0)[:, :2], atol=SURFACE_ATOL)
+    assert_allclose(np.array(top.evaluate_list(list(u))), surface.evaluate(u, 1.0)[:, :2], atol=SURFACE_ATOL)
     # and the curves pass through their data points (global interpolation)
-    assert_allclose(np.array(base.evaluate_list(list(surface.params))), initial, atol=1e-6)
+    assert_allclose(np.array(base.evaluate_list(list(surface.params))), initial, atol=SURFACE_ATOL)

@@ -1,0 +1,183 @@
+"""``ccsm export``: a static PMTiles or MBTiles archive of a dataset's morph tiles (docs/morph-tiles.md).
+
+The work is :func:`engine.serve.export.export_dataset`; this module resolves what to export (a source file,
+built into the cache store by content hash as ``ccsm simplify`` does, or a dataset of a store), checks the
+options and shows progress. Bad input ends with a one-line message and exit status 2 (app/cli/__init__.py).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TaskProgressColumn,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+
+from app.cli import app
+from app.cli.commands_engine import bad_input_exits, check_scale, console, default_cache_store, err_console, fail
+
+
+def _progress() -> Progress:
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TaskProgressColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=err_console,
+        transient=False,
+    )
+
+
+def _service_store() -> Path:
+    """The store ``ccsm build`` and ``ccsm serve`` use [env CCSM_STORE_PATH; var/ccsm.sqlite]."""
+    from pydantic import ValidationError
+
+    from app.settings import Settings
+
+    try:
+        return Settings().store_path
+    except ValidationError as exc:
+        fail(f"invalid settings: {exc.errors()[0].get('msg', exc)}")
+
+
+def _stored_dataset(store: Path, dataset: str, what: str) -> None:
+    """Exit 2 unless ``store`` holds ``dataset`` (``what`` names it in the message)."""
+    from engine.store.sqlite import CCSStore
+
+    if not store.is_file():
+        fail(f"{what}: no such file, and no store at {store} to look it up in (give --store PATH)")
+    ids = CCSStore(store, readonly=True).dataset_ids()
+    if dataset not in ids:
+        held = ", ".join(ids[:10]) + (", ..." if len(ids) > 10 else "") if ids else "none"
+        fail(f"{what}: no such file, nor a dataset of {store} (datasets: {held})")
+
+
+@app.command()
+def export(
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out", "-o", help="Output archive: FILE.pmtiles (PMTiles v3) or FILE.mbtiles.", show_default=False
+        ),
+    ],
+    source: Annotated[
+        str | None,
+        typer.Argument(
+            help="Contour file or DEM (built into the cache store by content hash), or a dataset id of --store.",
+            metavar="SOURCE|DATASET",
+            show_default=False,
+        ),
+    ] = None,
+    store: Annotated[
+        Path | None,
+        typer.Option(
+            "--store",
+            help="Store to read --dataset from [CCSM_STORE_PATH; var/ccsm.sqlite], or to build SOURCE into "
+            "[$XDG_CACHE_HOME/ccsm/sources.ccsm.sqlite].",
+        ),
+    ] = None,
+    dataset: Annotated[
+        str | None, typer.Option("--dataset", help="Dataset id of the store to export (instead of SOURCE).")
+    ] = None,
+    minzoom: Annotated[int, typer.Option("--minzoom", help="Smallest zoom exported.")] = 0,
+    maxzoom: Annotated[int, typer.Option("--maxzoom", help="Largest zoom exported (at most 16).")] = 14,
+    workers: Annotated[
+        int | None, typer.Option("--workers", help="Processes building and rendering (default: one per core).")
+    ] = None,
+    source_scale: Annotated[
+        float, typer.Option("--source-scale", help="Scale denominator of the input (t = 0).")
+    ] = 50_000.0,
+    target_scale: Annotated[
+        float, typer.Option("--target-scale", help="Scale denominator of the CCS's target (t = 1).")
+    ] = 500_000.0,
+    elevation_field: Annotated[
+        str | None,
+        typer.Option("--elevation-field", help="Elevation attribute of a contour file (found by name if omitted)."),
+    ] = None,
+    interval: Annotated[
+        float | None,
+        typer.Option("--interval", help="Contour interval of a DEM source, in its vertical unit."),
+    ] = None,
+) -> None:
+    """Write the morph tiles of a source or stored dataset to a PMTiles or MBTiles archive (gzip MVT).
+
+    Every tile of --minzoom .. --maxzoom over the dataset's bounds is rendered on every core, exactly as
+    ``GET /morph/{dataset}/{z}/{x}/{y}.mvt`` serves it; empty tiles are left out. The archive is written to a
+    temporary file and renamed when complete, so a failed export leaves an existing file as it was.
+    """
+    from engine.serve.datasets import SourceSpec, build_dataset, source_hash
+    from engine.serve.export import check_zoom_range, export_dataset
+    from engine.store.sqlite import CCSStore
+    from engine.tiles.archives import check_writable
+
+    started = time.perf_counter()
+    if workers is not None and workers < 1:
+        fail(f"--workers must be >= 1, got {workers}")
+    source_scale = check_scale("--source-scale", source_scale)
+    target_scale = check_scale("--target-scale", target_scale)
+    with bad_input_exits():
+        check_zoom_range(minzoom, maxzoom)
+        check_writable(out)  # before any build: an unwritable or unknown target fails at once
+        if source is not None and dataset is not None:
+            fail("give either SOURCE or --dataset, not both")
+        if source is None and dataset is None:
+            fail("give a contour file or DEM, or --store PATH --dataset ID")
+        if source is not None and Path(source).is_file():
+            path = Path(source).resolve()
+            spec = SourceSpec(
+                path=path,
+                dataset="",
+                name=path.stem,
+                elevation_field=elevation_field,
+                interval=interval,
+                source_scale=source_scale,
+                target_scale=target_scale,
+            )
+            spec = replace(spec, dataset="src-" + source_hash(spec.path, spec.params())[:16])
+            store_path = store or default_cache_store()
+            try:
+                cache = CCSStore(store_path)
+            except OSError as exc:
+                fail(f"cannot open the store {store_path}: {exc.strerror or exc}")
+            with _progress() as progress:
+                task = progress.add_task("building surfaces", total=None)
+                build_dataset(
+                    cache,
+                    spec,
+                    workers=workers,
+                    progress=lambda d, t: progress.update(task, completed=d, total=t),
+                )
+            dataset_id = spec.dataset
+        else:
+            dataset_id = dataset if dataset is not None else str(source)
+            store_path = store or _service_store()
+            _stored_dataset(store_path, dataset_id, source if source is not None else f"--dataset {dataset_id}")
+        with _progress() as progress:
+            task = progress.add_task(f"tiles z{minzoom}-{maxzoom}", total=None)
+            result = export_dataset(
+                store_path,
+                dataset_id,
+                out,
+                minzoom=minzoom,
+                maxzoom=maxzoom,
+                workers=workers,
+                progress=lambda d, t: progress.update(task, completed=d, total=t),
+            )
+    console.print(
+        f"{out}: {result.tiles} tiles ({result.format}, gzip MVT, z{minzoom}-{maxzoom}; {result.empty} empty left "
+        f"out), {result.bytes / 1e6:.2f} MB; tiles {result.seconds:.1f} s, total {time.perf_counter() - started:.1f} s",
+        highlight=False,
+        soft_wrap=True,
+    )
