@@ -36,7 +36,7 @@ sys.path.insert(0, str(REPO / "tests" / "browser"))
 from chromium_launch import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
 
 VIEWPORT = {"width": 640, "height": 480}
-START, END, EASE_MS = 11.0, 11.97, 4000
+START, END, EASE_MS = 11.0, 11.97, 8000
 
 
 @contextmanager
@@ -93,14 +93,15 @@ def tiles_in_view(page: Any, z: int) -> int:
     return (x1 - x0 + 1) * (y1 - y0 + 1)
 
 
-def requests_through_level(browser: Any, url: str, centre: list[float], query: str) -> tuple[int, int]:
-    """Tile requests while the page eases from START to END; and the tiles in view at START."""
+def requests_through_level(browser: Any, url: str, centre: list[float], query: str) -> tuple[int, int, int]:
+    """Tile requests on arriving at START, then while the page eases from START to END; the tiles in view."""
     context = browser.new_context(viewport=VIEWPORT)
     page = context.new_page()
     tiles: list[str] = []
     page.on("request", lambda r: tiles.append(r.url) if ".mvt" in r.url else None)
     page.goto(f"{url}/{query}")
     page.wait_for_function("() => window.ccsm && window.ccsm.state.tilejson && window.ccsm.settled()", timeout=120_000)
+    arrive = len(tiles)
     page.evaluate("([c, z]) => ccsm.maps.a.jumpTo({center: c, zoom: z})", [centre, START])
     page.wait_for_function("() => ccsm.settled()", timeout=120_000)
     view = tiles_in_view(page, int(START))
@@ -109,7 +110,7 @@ def requests_through_level(browser: Any, url: str, centre: list[float], query: s
     page.wait_for_timeout(200)
     page.wait_for_function("() => ccsm.settled()", timeout=120_000)
     context.close()
-    return len(tiles) - before, view
+    return before - arrive, len(tiles) - before, view
 
 
 FRAMES_JS = """async ([start, end, ms]) => {
@@ -168,12 +169,12 @@ def main() -> None:
         browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
         print(f"sample {dataset!r}, viewport {VIEWPORT['width']}x{VIEWPORT['height']}, zoom {START} -> {END}")
 
-        plugin, view = requests_through_level(browser, url, centre, "?method=ccsm")
-        eighth, _ = requests_through_level(browser, url, centre, "?method=ccsm&morph=off")
-        print("1. tile requests through one level")
+        p_arrive, plugin, view = requests_through_level(browser, url, centre, "?method=ccsm")
+        e_arrive, eighth, _ = requests_through_level(browser, url, centre, "?method=ccsm&morph=off")
+        print(f"1. tile requests: arriving at zoom {START}, then zooming through the level in {EASE_MS} ms")
         print(f"   tiles in view (a plain vector source fetches these once): {view}")
-        print(f"   plugin (morph tiles, 32 steps per level):                 {plugin}")
-        print(f"   eighth-swap (per-level tiles, 8 steps per level):         {eighth}")
+        print(f"   plugin (morph tiles, 32 steps per level):   {p_arrive:3d} + {plugin:3d}")
+        print(f"   eighth-swap (per-level tiles, 8 per level): {e_arrive:3d} + {eighth:3d}")
 
         runs: dict[str, list[dict[str, float]]] = {"plain": [], "plugin": []}
         for _ in range(args.runs):

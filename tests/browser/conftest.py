@@ -32,6 +32,8 @@ SERVICE_START_S = 240.0
 #: The service processes these fixtures started, by base URL (for stopping one while a test proves it is
 #: not needed).
 SERVICE_PROCESSES: dict[str, subprocess.Popen[bytes]] = {}
+#: Their stores, by base URL (for `ccsm export` from the same built datasets).
+SERVICE_STORES: dict[str, Path] = {}
 
 
 def _free_port() -> int:
@@ -94,11 +96,13 @@ def service_url(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
         )
     url = f"http://127.0.0.1:{port}"
     SERVICE_PROCESSES[url] = proc
+    SERVICE_STORES[url] = Path(env["CCSM_STORE_PATH"])
     try:
         _wait_for_service(url, proc, log)
         yield url
     finally:
         SERVICE_PROCESSES.pop(url, None)
+        SERVICE_STORES.pop(url, None)
         os.kill(proc.pid, signal.SIGCONT)
         proc.terminate()
         try:

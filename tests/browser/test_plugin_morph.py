@@ -1,12 +1,14 @@
 """The ccsm-morph plugin (web/plugin) in Chromium: a real mouse-wheel zoom through one level fetches each
 morph tile once, asks for nothing while the zoom stays inside the level, draws at least 32 distinct shapes and
 never a frame without contours; from the service (the project's page) and from a .pmtiles archive on a static
-file server that answers Range requests, with the tile service stopped.
+file server that answers Range requests (written by `ccsm export`), with the tile service stopped.
 """
 
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
@@ -14,7 +16,7 @@ from typing import Any
 
 import httpx
 import pytest
-from conftest import REPO, service_stopped
+from conftest import REPO, SERVICE_STORES, service_stopped
 from morph_pmtiles import morph_pmtiles_from_service
 from morph_probe import install_probe, read_probe, wheel_through_level
 from static_server import serve_static
@@ -100,10 +102,19 @@ def test_wheel_zoom_through_a_level_fetches_each_morph_tile_once(app):
 
 @pytest.fixture(scope="session")
 def morph_archive(service_url: str, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A .pmtiles archive of the sample's morph tiles, zooms 10 to 12, built from the running service."""
+    """A .pmtiles archive of the sample's morph tiles, zooms 10 to 12: written by `ccsm export` from the test
+    service's store (a process of its own that is gone when the test runs), or, for a service given by
+    CCSM_TEST_BASE_URL, fetched from it tile by tile (morph_pmtiles.py)."""
     out = tmp_path_factory.mktemp("archive") / "sample.pmtiles"
     dataset = next(d["id"] for d in httpx.get(f"{service_url}/datasets").json() if d.get("state") == "ready")
-    return morph_pmtiles_from_service(service_url, dataset, range(10, 13), out)
+    store = SERVICE_STORES.get(service_url)
+    if store is None:
+        return morph_pmtiles_from_service(service_url, dataset, range(10, 13), out)
+    export = ["export", dataset, "--store", str(store), "-o", str(out), "--minzoom", "10", "--maxzoom", "12"]
+    subprocess.run(
+        [sys.executable, "-c", "from app.cli import main; main()", *export], cwd=REPO, check=True, timeout=300
+    )
+    return out
 
 
 @pytest.fixture
