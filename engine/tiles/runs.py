@@ -84,6 +84,20 @@ def ranges(starts: NDArray[np.int64], ends: NDArray[np.int64]) -> NDArray[np.int
 
 
 @njit(cache=True)
+def _quantised_at(base, top, i, t, x0, y0, k):  # pragma: no cover - compiled
+    if t >= 1.0:
+        x = top[i, 0]
+        y = top[i, 1]
+    elif t <= 0.0:
+        x = base[i, 0]
+        y = base[i, 1]
+    else:
+        x = base[i, 0] + t * (top[i, 0] - base[i, 0])
+        y = base[i, 1] + t * (top[i, 1] - base[i, 1])
+    return np.int64(np.rint((x - x0) * k)), np.int64(np.rint((y0 - y) * k))
+
+
+@njit(cache=True)
 def _slice_runs_kernel(
     a, b, run_t, col, refill, sig, base, top, min_sig, x0, y0, k, out, plen, box
 ):  # pragma: no cover - compiled
@@ -101,17 +115,7 @@ def _slice_runs_kernel(
             for i in range(a[r], b[r]):
                 if not full and i != a[r] and i != last and not sig[i, c] > min_sig:
                     continue
-                if t >= 1.0:
-                    x = top[i, 0]
-                    y = top[i, 1]
-                elif t <= 0.0:
-                    x = base[i, 0]
-                    y = base[i, 1]
-                else:
-                    x = base[i, 0] + t * (top[i, 0] - base[i, 0])
-                    y = base[i, 1] + t * (top[i, 1] - base[i, 1])
-                qx = np.int64(np.rint((x - x0) * k))
-                qy = np.int64(np.rint((y0 - y) * k))
+                qx, qy = _quantised_at(base, top, i, t, x0, y0, k)
                 if n > start and qx == lx and qy == ly:
                     continue
                 out[n, 0] = qx
@@ -191,20 +195,6 @@ def slice_runs(
         box,
     )
     return out[:n], plen, box
-
-
-@njit(cache=True)
-def _quantised_at(base, top, i, t, x0, y0, k):  # pragma: no cover - compiled
-    if t >= 1.0:
-        x = top[i, 0]
-        y = top[i, 1]
-    elif t <= 0.0:
-        x = base[i, 0]
-        y = base[i, 1]
-    else:
-        x = base[i, 0] + t * (top[i, 0] - base[i, 0])
-        y = base[i, 1] + t * (top[i, 1] - base[i, 1])
-    return np.int64(np.rint((x - x0) * k)), np.int64(np.rint((y0 - y) * k))
 
 
 @njit(cache=True)
