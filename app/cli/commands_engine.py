@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
-from typing import Annotated, Any, NoReturn
+from typing import TYPE_CHECKING, Annotated, Any, NoReturn
 
 import typer
 from rich.console import Console
@@ -24,6 +24,9 @@ from rich.table import Table
 from app.cli import app
 from engine.errors import CCSMError
 from engine.types import BadFeature
+
+if TYPE_CHECKING:
+    from engine.store.sqlite import CCSStore, DatasetInfo
 
 err_console = Console(stderr=True)
 console = Console()
@@ -149,11 +152,9 @@ def simplify(
     """
     from engine.checks import check_method
     from engine.io.crs import parse_crs
-    from engine.serve.datasets import SourceSpec, build_dataset, source_hash
     from engine.serve.renderer import Renderer
     from engine.serve.simplify import feature_collection
     from engine.serve.simplify import simplify as simplify_dataset
-    from engine.store.sqlite import CCSStore
 
     method = method.strip().lower()
     scale = check_scale("--scale", scale)
@@ -166,27 +167,17 @@ def simplify(
         check_method(method)
         if not source.exists():
             fail(f"{source}: file not found")
-        spec = SourceSpec(
-            path=source.resolve(),
-            dataset="",
-            name=source.stem,
+        cache, info = build_into_cache(
+            source,
+            store,
             elevation_field=elevation_field,
             interval=interval,
             source_scale=source_scale,
             target_scale=target_scale,
+            workers=workers,
         )
-        spec = replace(spec, dataset="src-" + source_hash(spec.path, spec.params())[:16])
-        cache = CCSStore(store or default_cache_store())
-        with _progress() as progress:
-            task = progress.add_task("building surfaces", total=None)
-            info, _ = build_dataset(
-                cache,
-                spec,
-                workers=workers,
-                progress=lambda d, t: progress.update(task, completed=d, total=t),
-            )
         to_crs = output_crs(crs, info.source_crs)
-        result = simplify_dataset(Renderer(cache), spec.dataset, scale, method=method)
+        result = simplify_dataset(Renderer(cache), info.id, scale, method=method)
         doc = feature_collection(
             result.contours, scale, method, crs=to_crs, decimals=7 if parse_crs(to_crs).is_geographic else 3
         )
@@ -202,6 +193,47 @@ def simplify(
         highlight=False,
         soft_wrap=True,
     )
+
+
+def build_into_cache(
+    source: Path,
+    store: Path | None,
+    *,
+    elevation_field: str | None,
+    interval: float | None,
+    source_scale: float,
+    target_scale: float,
+    workers: int | None,
+) -> tuple[CCSStore, DatasetInfo]:
+    """Build a source into the cache store (once per content hash of its bytes and scales), with a progress bar.
+
+    The dataset id is ``src-`` and the hash's first 16 hex digits, so another scale or method of the same
+    source, or an export of it, reuses the build.
+    """
+    from engine.serve.datasets import SourceSpec, build_dataset, source_hash
+    from engine.store.sqlite import CCSStore
+
+    spec = SourceSpec(
+        path=source.resolve(),
+        dataset="",
+        name=source.stem,
+        elevation_field=elevation_field,
+        interval=interval,
+        source_scale=source_scale,
+        target_scale=target_scale,
+    )
+    spec = replace(spec, dataset="src-" + source_hash(spec.path, spec.params())[:16])
+    store_path = store or default_cache_store()
+    try:
+        cache = CCSStore(store_path)
+    except OSError as exc:
+        fail(f"cannot open the store {store_path}: {exc.strerror or exc}")
+    with _progress() as progress:
+        task = progress.add_task("building surfaces", total=None)
+        info, _ = build_dataset(
+            cache, spec, workers=workers, progress=lambda d, t: progress.update(task, completed=d, total=t)
+        )
+    return cache, info
 
 
 def write_json_atomically(path: Path, doc: dict[str, Any]) -> None:

@@ -8,7 +8,6 @@ options and shows progress. Bad input ends with a one-line message and exit stat
 from __future__ import annotations
 
 import time
-from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -24,7 +23,7 @@ from rich.progress import (
 )
 
 from app.cli import app
-from app.cli.commands_engine import bad_input_exits, check_scale, console, default_cache_store, err_console, fail
+from app.cli.commands_engine import bad_input_exits, build_into_cache, check_scale, console, err_console, fail
 
 
 def _progress() -> Progress:
@@ -117,9 +116,7 @@ def export(
     ``GET /morph/{dataset}/{z}/{x}/{y}.mvt`` serves it; empty tiles are left out. The archive is written to a
     temporary file and renamed when complete, so a failed export leaves an existing file as it was.
     """
-    from engine.serve.datasets import SourceSpec, build_dataset, source_hash
     from engine.serve.export import check_zoom_range, export_dataset
-    from engine.store.sqlite import CCSStore
     from engine.tiles.archives import check_writable
 
     started = time.perf_counter()
@@ -135,31 +132,17 @@ def export(
         if source is None and dataset is None:
             fail("give a contour file or DEM, or --store PATH --dataset ID")
         if source is not None and Path(source).is_file():
-            path = Path(source).resolve()
-            spec = SourceSpec(
-                path=path,
-                dataset="",
-                name=path.stem,
+            cache, info = build_into_cache(
+                Path(source),
+                store,
                 elevation_field=elevation_field,
                 interval=interval,
                 source_scale=source_scale,
                 target_scale=target_scale,
+                workers=workers,
             )
-            spec = replace(spec, dataset="src-" + source_hash(spec.path, spec.params())[:16])
-            store_path = store or default_cache_store()
-            try:
-                cache = CCSStore(store_path)
-            except OSError as exc:
-                fail(f"cannot open the store {store_path}: {exc.strerror or exc}")
-            with _progress() as progress:
-                task = progress.add_task("building surfaces", total=None)
-                build_dataset(
-                    cache,
-                    spec,
-                    workers=workers,
-                    progress=lambda d, t: progress.update(task, completed=d, total=t),
-                )
-            dataset_id = spec.dataset
+            store_path = cache.path
+            dataset_id = info.id
         else:
             dataset_id = dataset if dataset is not None else str(source)
             store_path = store or _service_store()
