@@ -90,6 +90,16 @@ def _bad_feature_table(bad: list[BadFeature], limit: int | None = None) -> Table
     return table
 
 
+#: Build options shared by the commands that build a source into the cache store (simplify, export).
+SourceScaleOption = Annotated[float, typer.Option("--source-scale", help="Scale denominator of the input (t = 0).")]
+TargetScaleOption = Annotated[
+    float, typer.Option("--target-scale", help="Scale denominator of the CCS's target (t = 1).")
+]
+IntervalOption = Annotated[
+    float | None, typer.Option("--interval", help="Contour interval of a DEM source, in its vertical unit.")
+]
+
+
 def default_cache_store() -> Path:
     """Where ``ccsm simplify`` keeps what it builds, so a second scale or method costs seconds."""
     base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
@@ -105,9 +115,7 @@ def simplify(
     scale: Annotated[
         float, typer.Option("--scale", help="Map scale denominator of the output (250000 for 1:250,000).")
     ] = 250_000.0,
-    out: Annotated[Path, typer.Option("--out", "-o", help="Output GeoJSON file.")] = Path(
-        "simplified.geojson"
-    ),
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output GeoJSON file.")] = Path("simplified.geojson"),
     method: Annotated[
         str,
         typer.Option(
@@ -115,28 +123,15 @@ def simplify(
             help="ccsm, dp (Douglas-Peucker), wm (Wang-Mueller), vw (Visvalingam-Whyatt) or original.",
         ),
     ] = "ccsm",
-    source_scale: Annotated[
-        float, typer.Option("--source-scale", help="Scale denominator of the input (t = 0).")
-    ] = 50_000.0,
-    target_scale: Annotated[
-        float, typer.Option("--target-scale", help="Scale denominator of the CCS's target (t = 1).")
-    ] = 500_000.0,
+    source_scale: SourceScaleOption = 50_000.0,
+    target_scale: TargetScaleOption = 500_000.0,
     elevation_field: Annotated[
         str | None,
-        typer.Option(
-            "--elevation-field", help="Elevation attribute of a contour file (found by name if omitted)."
-        ),
+        typer.Option("--elevation-field", help="Elevation attribute of a contour file (found by name if omitted)."),
     ] = None,
-    interval: Annotated[
-        float | None,
-        typer.Option("--interval", help="Contour interval of a DEM source, in its vertical unit."),
-    ] = None,
-    crs: Annotated[
-        str, typer.Option("--crs", help="Output CRS: 4326 (GeoJSON default), 3857 or source.")
-    ] = "4326",
-    workers: Annotated[
-        int | None, typer.Option("--workers", help="Worker processes (default: one per core).")
-    ] = None,
+    interval: IntervalOption = None,
+    crs: Annotated[str, typer.Option("--crs", help="Output CRS: 4326 (GeoJSON default), 3857 or source.")] = "4326",
+    workers: Annotated[int | None, typer.Option("--workers", help="Worker processes (default: one per core).")] = None,
     store: Annotated[
         Path | None,
         typer.Option(
@@ -250,37 +245,25 @@ def evaluate(
     out: Annotated[
         Path, typer.Option("--out", help="Directory for the CSV tables, PNG figures and summary.md.")
     ] = Path("evaluation"),
-    levels: Annotated[
-        int, typer.Option("--levels", help="Results per method and contour (paper: 100).")
-    ] = 100,
+    levels: Annotated[int, typer.Option("--levels", help="Results per method and contour (paper: 100).")] = 100,
     sample: Annotated[
         int | None, typer.Option("--sample", help="Evaluate this many random contours (default: all).")
     ] = None,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the sample and of the 20 table contours.")] = 0,
-    source_scale: Annotated[
-        float, typer.Option("--source-scale", help="Scale denominator of the input.")
-    ] = 50_000.0,
-    target_scale: Annotated[
-        float, typer.Option("--target-scale", help="Target scale for --target scale.")
-    ] = 500_000.0,
+    source_scale: Annotated[float, typer.Option("--source-scale", help="Scale denominator of the input.")] = 50_000.0,
+    target_scale: Annotated[float, typer.Option("--target-scale", help="Target scale for --target scale.")] = 500_000.0,
     target: Annotated[
         str, typer.Option("--target", help="extreme (paper Fig. 10: down to 2 points / a triangle) or scale.")
     ] = "extreme",
-    crossing_step: Annotated[
-        int, typer.Option("--crossing-step", help="Count crossings at every n-th level.")
-    ] = 1,
+    crossing_step: Annotated[int, typer.Option("--crossing-step", help="Count crossings at every n-th level.")] = 1,
     table_contours: Annotated[
         int, typer.Option("--table-contours", help="Random contours of Table 2, Fig. 11, Table 3.")
     ] = 20,
     elevation_field: Annotated[
         str | None, typer.Option("--elevation-field", help="Elevation attribute of a contour file.")
     ] = None,
-    interval: Annotated[
-        float | None, typer.Option("--interval", help="Contour interval of a DEM source.")
-    ] = None,
-    workers: Annotated[
-        int | None, typer.Option("--workers", help="Worker processes (default: one per core).")
-    ] = None,
+    interval: Annotated[float | None, typer.Option("--interval", help="Contour interval of a DEM source.")] = None,
+    workers: Annotated[int | None, typer.Option("--workers", help="Worker processes (default: one per core).")] = None,
 ) -> None:
     """Compare CCSM with DP, WM and VW as the paper's section 3.2 does; write tables and figures."""
     from engine.evaluation.pipeline import evaluate_set

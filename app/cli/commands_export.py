@@ -23,7 +23,17 @@ from rich.progress import (
 )
 
 from app.cli import app
-from app.cli.commands_engine import bad_input_exits, build_into_cache, check_scale, console, err_console, fail
+from app.cli.commands_engine import (
+    IntervalOption,
+    SourceScaleOption,
+    TargetScaleOption,
+    bad_input_exits,
+    build_into_cache,
+    check_scale,
+    console,
+    err_console,
+    fail,
+)
 
 
 def _progress() -> Progress:
@@ -95,20 +105,13 @@ def export(
     workers: Annotated[
         int | None, typer.Option("--workers", help="Processes building and rendering (default: one per core).")
     ] = None,
-    source_scale: Annotated[
-        float, typer.Option("--source-scale", help="Scale denominator of the input (t = 0).")
-    ] = 50_000.0,
-    target_scale: Annotated[
-        float, typer.Option("--target-scale", help="Scale denominator of the CCS's target (t = 1).")
-    ] = 500_000.0,
+    source_scale: SourceScaleOption = 50_000.0,
+    target_scale: TargetScaleOption = 500_000.0,
     elevation_field: Annotated[
         str | None,
         typer.Option("--elevation-field", help="Elevation attribute of a contour file (found by name if omitted)."),
     ] = None,
-    interval: Annotated[
-        float | None,
-        typer.Option("--interval", help="Contour interval of a DEM source, in its vertical unit."),
-    ] = None,
+    interval: IntervalOption = None,
 ) -> None:
     """Write the morph tiles of a source or stored dataset to a PMTiles or MBTiles archive (gzip MVT).
 
