@@ -9,17 +9,25 @@ from __future__ import annotations
 
 import logging
 import uuid
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from typing import Any
 
-from fastapi import FastAPI
+from fastapi import FastAPI, Request
 from fastapi.middleware.cors import CORSMiddleware
+from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from app.errors import add_exception_handlers
+from app.api_docs import add_api_docs
+from app.errors import add_exception_handlers, error_body, public_message
+from app.head_requests import HeadAsGetMiddleware
 from app.lifespan import lifespan
+from app.render_pool import RETRY_AFTER_S, RenderUnavailable, render_pool_for
 from app.routes import datasets, meta, simplify, tiles
 from app.settings import Settings
+
+log = logging.getLogger("ccsm.app")
 
 DESCRIPTION = """
 Terrain contour lines that generalize **continuously** as the map zooms (Qian et al. 2021, the continuous
@@ -60,6 +68,26 @@ class RequestIdMiddleware:
         await self.app(scope, receive, send_with_id)
 
 
+@asynccontextmanager
+async def app_lifespan(app: FastAPI) -> AsyncIterator[None]:
+    """The service's lifespan (store, builds), plus the render worker pool around it."""
+    async with lifespan(app):
+        pool = render_pool_for(app.state.settings)
+        app.state.render_pool = pool
+        await pool.start()
+        try:
+            yield
+        finally:
+            await pool.close()
+
+
+async def render_unavailable_handler(request: Request, exc: Exception) -> JSONResponse:
+    """503 with Retry-After: the render pool is full, or the request passed its deadline."""
+    log.info("%s %s -> 503 %s", request.method, request.url.path, exc)
+    body = error_body(request, "service_busy", public_message(str(exc)))
+    return JSONResponse(body, 503, headers={"Retry-After": str(RETRY_AFTER_S), "Cache-Control": "no-store"})
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     """Build the application from settings (read from the environment when None)."""
     settings = settings or Settings()
@@ -70,10 +98,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         title="ccsm",
         description=DESCRIPTION,
         version="0.1.0",
-        lifespan=lifespan,
+        lifespan=app_lifespan,
+        docs_url=None,  # served from local files by add_api_docs
+        redoc_url=None,
     )
     app.state.settings = settings
     add_exception_handlers(app)
+    app.add_exception_handler(RenderUnavailable, render_unavailable_handler)
+    add_api_docs(app)
     app.include_router(tiles.router)
     app.include_router(simplify.router)
     app.include_router(datasets.router)
@@ -92,6 +124,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         expose_headers=["ETag", "X-Request-ID", "X-Tile-Scale"],
         max_age=600,
     )
+    app.add_middleware(HeadAsGetMiddleware)
     app.add_middleware(RequestIdMiddleware)
     return app
 

@@ -61,6 +61,30 @@ class Settings(BaseSettings):
         100_000, ge=1, description="Cached DP/VW/WM results per worker process."
     )
 
+    # -- load: CPU work off the event loop (docs/service.md, "Under load") -------------------------------
+    render_workers: int = Field(
+        2, ge=1, le=64, description="Worker processes drawing tiles and /simplify, per server process."
+    )
+    render_queue: int = Field(
+        8, ge=0, description="Requests that may wait for a busy render worker; beyond it: 503 at once."
+    )
+    request_timeout_s: float = Field(
+        20.0,
+        gt=0,
+        description="Deadline of a tile or /simplify request, seconds; then 503 and its worker is replaced.",
+    )
+    wm_max_vertices: int = Field(
+        50_000, ge=3, description="Largest contour (vertices) method=wm simplifies; larger: 400 naming it."
+    )
+    public_url: str | None = Field(
+        None,
+        description="Base URL clients reach the service at (TileJSON tile URLs); unset = the address the "
+        "server listens on. The Host header is never used.",
+    )
+    trust_forwarded_headers: bool = Field(
+        False, description="Take the TileJSON base URL from X-Forwarded-Proto/-Host (behind a trusted proxy)."
+    )
+
     # -- API ----------------------------------------------------------------------------------------------
     cors_origins: Annotated[list[str], NoDecode] = Field(
         default_factory=lambda: ["*"], description="Origins allowed by CORS, comma-separated ('*' = any)."

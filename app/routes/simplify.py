@@ -2,19 +2,18 @@
 
 from __future__ import annotations
 
-import json
 from typing import Annotated
 
 from fastapi import APIRouter, Depends, Query, Request, Response
 
 from app.dependencies import MethodName, get_service, get_settings
+from app.render_jobs import SimplifyJob
+from app.render_pool import RenderPool, get_render_pool
 from app.responses import accepts_gzip, body_response, etag_matches, make_etag
 from app.service import DatasetService
 from app.settings import Settings
 from engine.checks import MAX_SCALE
 from engine.errors import InvalidParameter
-from engine.serve.simplify import feature_collection
-from engine.serve.simplify import simplify as simplify_dataset
 
 router = APIRouter(tags=["simplify"])
 
@@ -38,10 +37,11 @@ def parse_bbox(text: str | None) -> list[float] | None:
         200: {
             "content": {"application/geo+json": {}},
             "description": "GeoJSON FeatureCollection (EPSG:4326).",
-        }
+        },
+        503: {"description": "Busy, or not done within the deadline (request_timeout_s); see Retry-After."},
     },
 )
-def simplify(
+async def simplify(
     request: Request,
     scale: Annotated[
         float,
@@ -54,6 +54,7 @@ def simplify(
     ],
     service: Annotated[DatasetService, Depends(get_service)],
     settings: Annotated[Settings, Depends(get_settings)],
+    pool: Annotated[RenderPool, Depends(get_render_pool)],
     dataset: Annotated[
         str | None, Query(description="Dataset id; default: the first configured dataset.", max_length=64)
     ] = None,
@@ -71,8 +72,5 @@ def simplify(
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
-    result = simplify_dataset(service.renderer, ident, scale, bbox_lonlat=box, method=method)
-    doc = feature_collection(result.contours, scale, method)
-    doc["dataset"] = ident
-    body = json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
-    return body_response(request, body, "application/geo+json", headers)
+    result = await pool.run(SimplifyJob(ident, scale, box, method))
+    return body_response(request, result.body or b"", "application/geo+json", headers)

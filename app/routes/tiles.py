@@ -6,10 +6,12 @@ from typing import Annotated, Any
 from urllib.parse import urlencode
 
 from fastapi import APIRouter, Depends, Path, Request, Response
-from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
 
 from app.dependencies import TileQuery, get_service, get_settings
+from app.public_url import public_base_url
+from app.render_jobs import MorphJob, TileJob
+from app.render_pool import RenderPool, get_render_pool
 from app.responses import accepts_gzip, body_response, etag_matches, make_etag
 from app.service import DatasetService, lonlat_bounds
 from app.settings import Settings
@@ -45,6 +47,7 @@ DatasetPath = Annotated[str, Path(description="Dataset id (see GET /datasets).",
         204: {"description": "No contour in this tile."},
         304: {"description": "Not modified (If-None-Match matched the ETag)."},
         404: {"description": "Unknown dataset, or z/x/y outside the tile matrix or the served zooms."},
+        503: {"description": "Busy, or not drawn within the deadline (request_timeout_s); see Retry-After."},
     },
     name="get_tile",
 )
@@ -57,6 +60,7 @@ async def get_tile(
     q: Annotated[TileQuery, Depends()],
     service: Annotated[DatasetService, Depends(get_service)],
     settings: Annotated[Settings, Depends(get_settings)],
+    pool: Annotated[RenderPool, Depends(get_render_pool)],
 ) -> Response:
     """One Mapbox Vector Tile of a dataset's contours, generalized for the tile's (fractional) zoom."""
     renderer = service.renderer
@@ -79,15 +83,11 @@ async def get_tile(
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
-    kwargs: dict[str, Any] = {"zoom": zoom, "method": q.method, "t": t}
-    if q.method in ("dp", "wm", "vw"):  # pure-Python baselines: keep the event loop free
-        result = await run_in_threadpool(renderer.tile, dataset, z, x, y, **kwargs)
-    else:
-        result = renderer.tile(dataset, z, x, y, **kwargs)
+    result = await pool.run(TileJob(dataset, z, x, y, zoom, q.method, t))
     headers["X-Tile-Scale"] = f"{result.scale:.1f}"
-    if result.data is None:
+    if result.body is None:
         return Response(status_code=204, headers=headers)
-    return body_response(request, result.data, MVT_MEDIA_TYPE, headers)
+    return body_response(request, result.body, MVT_MEDIA_TYPE, headers)
 
 
 @router.get(
@@ -101,6 +101,7 @@ async def get_tile(
         204: {"description": "No contour in this tile."},
         304: {"description": "Not modified (If-None-Match matched the ETag)."},
         404: {"description": "Unknown dataset, or z/x/y outside the tile matrix or the served zooms."},
+        503: {"description": "Busy, or not drawn within the deadline (request_timeout_s); see Retry-After."},
     },
     name="get_morph_tile",
 )
@@ -112,11 +113,11 @@ async def get_morph_tile(
     y: Annotated[int, Path(description="Tile row, 0 at the north edge (XYZ scheme).", ge=0)],
     service: Annotated[DatasetService, Depends(get_service)],
     settings: Annotated[Settings, Depends(get_settings)],
+    pool: Annotated[RenderPool, Depends(get_render_pool)],
 ) -> Response:
     """One morph tile: the CCSM contours at both ends of the zoom level with the same vertices, and their t
     through the level, so a client draws every zoom inside the level without asking again
     (docs/morph-tiles.md)."""
-    renderer = service.renderer
     check_tile(z, x, y, settings.min_zoom, settings.max_zoom)
     version = service.require_ready(dataset)
     gz = accepts_gzip(request)
@@ -124,10 +125,10 @@ async def get_morph_tile(
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
-    result = await run_in_threadpool(renderer.morph_tile, dataset, z, x, y)
-    if result.data is None:
+    result = await pool.run(MorphJob(dataset, z, x, y))
+    if result.body is None:
         return Response(status_code=204, headers=headers)
-    return body_response(request, result.data, MVT_MEDIA_TYPE, headers)
+    return body_response(request, result.body, MVT_MEDIA_TYPE, headers)
 
 
 @router.get("/tiles/{dataset}/tilejson.json", name="get_tilejson")
@@ -160,7 +161,7 @@ def tilejson_response(
     info, interval = service.renderer.info(dataset)
     query = [(k, v) for k, v in request.query_params.multi_items() if k != "v"]
     query.append(("v", str(version)))
-    base = str(request.base_url).rstrip("/")
+    base = public_base_url(request, settings)  # never the Host header: see app/public_url.py
     url = f"{base}/{kind}/{dataset}/{{z}}/{{x}}/{{y}}.mvt?{urlencode(query)}"
     bounds = lonlat_bounds(info)
     lat = (bounds[1] + bounds[3]) / 2
@@ -211,7 +212,7 @@ def tilejson_response(
             }
         )
         body["ccsm_morph"] = MORPH_TILEJSON
-    etag = make_etag("tilejson", dataset, version, str(request.url))
+    etag = make_etag("tilejson", dataset, version, url)
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={min(settings.cache_max_age, 60)}"}
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)

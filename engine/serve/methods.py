@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 from engine.baselines import BASELINE_METHODS, simplify_at_scale
 from engine.ccsm.regression import t_at_scales
 from engine.ccsm.similarity import similarity
+from engine.errors import InvalidParameter
 from engine.geom.polyline import closed_path
 from engine.io.crs import WEB_MERCATOR, make_transformer
 from engine.serve.cache import LRUCache
@@ -28,6 +29,10 @@ from engine.types import METHODS, Coords
 
 #: Baseline results are cached per 1/16 of a zoom level of scale: a 4 % step, invisible on screen.
 SCALE_STEPS_PER_OCTAVE = 16
+
+
+class ContourTooLarge(InvalidParameter):
+    """A contour has more vertices than a baseline method is allowed to simplify in one request."""
 
 
 class RecordSource(Protocol):
@@ -166,13 +171,37 @@ class BaselineMethod(Method):
     cached per (contour, step).
     """
 
-    def __init__(self, name: str, cache: LRUCache[tuple[int, str, int], tuple[Coords, Coords]]) -> None:
+    def __init__(
+        self,
+        name: str,
+        cache: LRUCache[tuple[int, str, int], tuple[Coords, Coords]],
+        max_vertices: int | None = None,
+    ) -> None:
         self.name = name  # type: ignore[misc]
         self.cache = cache
+        self.max_vertices = max_vertices
         self._transformers: dict[str, Callable[[Any], Coords]] = {}
 
+    def check_size(self, rec: ContourRecord) -> None:
+        """Refuse a contour above ``max_vertices``: Wang–Müller's cost grows faster than its size (a
+        1,000,000-vertex line takes minutes), so one request must not be able to ask for it."""
+        n = len(rec.original_w)
+        if self.max_vertices is not None and n > self.max_vertices:
+            raise ContourTooLarge(
+                f"contour {rec.contour_id!r} (feature {rec.fid}) has {n:,} vertices; method {self.name!r} "
+                f"simplifies contours of at most {self.max_vertices:,} vertices (limit wm_max_vertices); "
+                "use method=ccsm, dp or vw"
+            )
+
     def line(self, rec: ContourRecord, scale: float, working_crs: str) -> tuple[Coords, Coords]:
-        """(EPSG:3857 closed path, working-CRS coordinates) of the method's result at a scale (cached)."""
+        """(EPSG:3857 closed path, working-CRS coordinates) of the method's result at a scale (cached).
+
+        Raises
+        ------
+        ContourTooLarge
+            The contour has more vertices than ``max_vertices``.
+        """
+        self.check_size(rec)
         step = round(math.log2(scale) * SCALE_STEPS_PER_OCTAVE)
         hit = self.cache.get((rec.fid, self.name, step))
         if hit is not None:
@@ -200,11 +229,17 @@ class BaselineMethod(Method):
         return xy, float(similarity(rec.original_w, xy_w, rec.closed))
 
 
-def make_methods(baseline_cache_entries: int) -> dict[str, Method]:
-    """One instance of every method, by name (the baselines sharing one bounded result cache)."""
+def make_methods(
+    baseline_cache_entries: int, max_vertices: Mapping[str, int] | None = None
+) -> dict[str, Method]:
+    """One instance of every method, by name (the baselines sharing one bounded result cache).
+
+    ``max_vertices`` caps the contour size per baseline method (e.g. ``{"wm": 50_000}``); none by default.
+    """
     cache: LRUCache[tuple[int, str, int], tuple[Coords, Coords]] = LRUCache(baseline_cache_entries)
     methods: dict[str, Method] = {"ccsm": ContinuousMethod(), "original": OriginalMethod()}
+    limits = max_vertices or {}
     for name in BASELINE_METHODS:
-        methods[name] = BaselineMethod(name, cache)
+        methods[name] = BaselineMethod(name, cache, limits.get(name))
     assert set(methods) == set(METHODS), "every method name has an implementation"
     return methods

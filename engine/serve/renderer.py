@@ -13,7 +13,7 @@ from the contours the tile touches, through an LRU cache of decoded rows (the sa
 from __future__ import annotations
 
 import threading
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -92,6 +92,8 @@ class Renderer:
         Memory for decoded contour rows and dataset packs.
     baseline_cache_entries
         Number of baseline results kept.
+    baseline_max_vertices
+        Largest contour each baseline method may simplify (e.g. ``{"wm": 50_000}``); none by default.
     """
 
     def __init__(
@@ -101,10 +103,11 @@ class Renderer:
         *,
         contour_cache_bytes: int = 512 << 20,
         baseline_cache_entries: int = 100_000,
+        baseline_max_vertices: Mapping[str, int] | None = None,
     ) -> None:
         self.store = store
         self.options = options or TileOptions()
-        self.methods: dict[str, Method] = make_methods(baseline_cache_entries)
+        self.methods: dict[str, Method] = make_methods(baseline_cache_entries, baseline_max_vertices)
         self.contours: LRUCache[int, ContourRecord] = LRUCache(contour_cache_bytes, lambda r: r.nbytes + 1024)
         self.contour_cache_bytes = contour_cache_bytes
         self._info: dict[str, tuple[DatasetInfo, float | None]] = {}

@@ -1,0 +1,137 @@
+"""What a render worker process does: open the store read-only, draw tiles and /simplify answers.
+
+This module runs inside the worker processes of :mod:`app.render_pool` (docs/service.md, "Under load").
+It imports no web framework: a job is a plain tuple in, bytes (or an engine error) out.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import signal
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from pathlib import Path
+from typing import Any
+
+from engine.serve.renderer import Renderer, TileOptions
+from engine.serve.simplify import feature_collection
+from engine.serve.simplify import simplify as simplify_dataset
+from engine.store.sqlite import CCSStore
+
+log = logging.getLogger("ccsm.render")
+
+
+@dataclass(frozen=True)
+class RenderConfig:
+    """What a worker needs from the settings (plain values: it crosses a process boundary)."""
+
+    store_path: Path
+    tile: TileOptions
+    contour_cache_bytes: int
+    baseline_cache_entries: int
+    wm_max_vertices: int
+
+
+@dataclass(frozen=True)
+class TileJob:
+    """One per-level tile (every method)."""
+
+    dataset: str
+    z: int
+    x: int
+    y: int
+    zoom: float
+    method: str
+    t: float | None
+
+
+@dataclass(frozen=True)
+class MorphJob:
+    """One morph tile."""
+
+    dataset: str
+    z: int
+    x: int
+    y: int
+
+
+@dataclass(frozen=True)
+class SimplifyJob:
+    """Every contour of a dataset at a scale, as GeoJSON bytes."""
+
+    dataset: str
+    scale: float
+    bbox: list[float] | None
+    method: str
+
+
+@dataclass(frozen=True)
+class Rendered:
+    """A job's answer: the body (None for an empty tile) and the scale it was drawn at."""
+
+    body: bytes | None
+    scale: float
+
+
+Job = TileJob | MorphJob | SimplifyJob
+
+
+def make_renderer(config: RenderConfig) -> Renderer:
+    """The worker's own store connection and renderer (caches are per worker)."""
+    return Renderer(
+        CCSStore(config.store_path),
+        config.tile,
+        contour_cache_bytes=config.contour_cache_bytes,
+        baseline_cache_entries=config.baseline_cache_entries,
+        baseline_max_vertices={"wm": config.wm_max_vertices},
+    )
+
+
+def run_job(renderer: Renderer, job: Job) -> Rendered:
+    """Do one job."""
+    if isinstance(job, TileJob):
+        tile = renderer.tile(job.dataset, job.z, job.x, job.y, zoom=job.zoom, method=job.method, t=job.t)
+        return Rendered(tile.data, tile.scale)
+    if isinstance(job, MorphJob):
+        tile = renderer.morph_tile(job.dataset, job.z, job.x, job.y)
+        return Rendered(tile.data, tile.scale)
+    result = simplify_dataset(renderer, job.dataset, job.scale, bbox_lonlat=job.bbox, method=job.method)
+    doc = feature_collection(result.contours, job.scale, job.method)
+    doc["dataset"] = job.dataset
+    return Rendered(json.dumps(doc, separators=(",", ":"), allow_nan=False).encode(), job.scale)
+
+
+def warm(renderer: Renderer) -> None:
+    """Pack every stored dataset now, so that cost (seconds on a large dataset) is paid before the worker
+    takes its first request, not inside one request's deadline."""
+    for dataset in renderer.store.dataset_ids():
+        try:
+            renderer.pack(dataset)
+        except Exception:  # a dataset that cannot be packed fails in its own requests, with its own error
+            log.warning("render worker: could not pack %s ahead of use", dataset, exc_info=True)
+
+
+def worker_main(conn: Connection, config: RenderConfig) -> None:
+    """A worker's loop: warm up, say ``ready``, then answer jobs until the pipe closes.
+
+    Each answer is ``("ok", Rendered)`` or ``("error", exception)``. SIGINT is left to the server process,
+    which stops its workers itself (so Ctrl-C does not print a traceback per worker).
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    renderer = make_renderer(config)
+    warm(renderer)
+    conn.send(("ready", None))
+    while True:
+        try:
+            job = conn.recv()
+        except (EOFError, OSError):  # the server closed the pipe or went away
+            return
+        try:
+            answer: tuple[str, Any] = ("ok", run_job(renderer, job))
+        except Exception as exc:  # sent to the server, which answers the request with it
+            answer = ("error", exc)
+        try:
+            conn.send(answer)
+        except Exception as exc:  # an exception that does not pickle: send what it says instead
+            conn.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}")))
