@@ -23,7 +23,7 @@ from app.api_docs import add_api_docs
 from app.errors import add_exception_handlers, error_body, public_message
 from app.head_requests import HeadAsGetMiddleware
 from app.lifespan import lifespan
-from app.render_pool import RETRY_AFTER_S, RenderUnavailable, render_pool_for
+from app.render_pool import RETRY_AFTER_S, RenderUnavailable, render_lanes_for
 from app.routes import datasets, meta, simplify, tiles
 from app.settings import Settings
 
@@ -70,15 +70,15 @@ class RequestIdMiddleware:
 
 @asynccontextmanager
 async def app_lifespan(app: FastAPI) -> AsyncIterator[None]:
-    """The service's lifespan (store, builds), plus the render worker pool around it."""
+    """The service's lifespan (store, builds), plus the render workers inside it."""
     async with lifespan(app):
-        pool = render_pool_for(app.state.settings)
-        app.state.render_pool = pool
-        await pool.start()
+        lanes = render_lanes_for(app.state.settings)
+        app.state.render_lanes = lanes
+        await lanes.start()
         try:
             yield
         finally:
-            await pool.close()
+            await lanes.close()
 
 
 async def render_unavailable_handler(request: Request, exc: Exception) -> JSONResponse:

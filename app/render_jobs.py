@@ -14,6 +14,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
+from engine.errors import CCSMError
 from engine.serve.renderer import Renderer, TileOptions
 from engine.serve.simplify import feature_collection
 from engine.serve.simplify import simplify as simplify_dataset
@@ -129,8 +130,11 @@ def worker_main(conn: Connection, config: RenderConfig) -> None:
             return
         try:
             answer: tuple[str, Any] = ("ok", run_job(renderer, job))
-        except Exception as exc:  # sent to the server, which answers the request with it
+        except CCSMError as exc:  # a domain error: the server answers with its status and message
             answer = ("error", exc)
+        except Exception as exc:  # a bug: the server answers 500; the traceback is only here, in the log
+            log.error("render job %r failed", job, exc_info=exc)
+            answer = ("error", RuntimeError("render job failed (see the log)"))
         try:
             conn.send(answer)
         except Exception as exc:  # an exception that does not pickle: send what it says instead

@@ -77,7 +77,10 @@ class RenderPool:
         self.size = size
         self.queue = queue
         self.timeout_s = timeout_s
-        self._ctx = multiprocessing.get_context("spawn")  # never fork a process that runs threads
+        # Never fork the server (it runs threads): a fork server, started clean once per server process with
+        # the engine imported, forks each worker, so a replacement is ready in well under a second.
+        self._ctx = multiprocessing.get_context("forkserver")
+        self._ctx.set_forkserver_preload(["app.render_jobs", "app.render_preload"])
         # Threads that wait on pipes and start processes, so the event loop never blocks on either.
         self._threads = ThreadPoolExecutor(max_workers=2 * size + 2, thread_name_prefix="ccsm-render")
         self._idle: asyncio.Queue[Worker] = asyncio.Queue()
@@ -89,9 +92,10 @@ class RenderPool:
 
     # -- lifecycle ---------------------------------------------------------------------------------------
     async def start(self) -> None:
-        """Start the workers (they warm up in the background; requests wait for the first one ready)."""
-        for _ in range(self.size):
-            self._spawn_soon()
+        """Start the workers and wait until they are warm (every stored dataset packed), so the first
+        requests after a restart do not pay that inside their deadline. A worker that fails to start is
+        retried in the background; the server starts anyway."""
+        await asyncio.gather(*(self._spawn() for _ in range(self.size)), return_exceptions=True)
 
     def _spawn_soon(self) -> None:
         loop = asyncio.get_running_loop()
@@ -244,11 +248,49 @@ def _log_failure(task: asyncio.Task[None]) -> None:
         log.error("starting a render worker failed", exc_info=task.exception())
 
 
-def render_pool_for(settings: Settings) -> RenderPool:
-    """The pool the settings ask for (not started)."""
+#: Methods whose tiles go to the heavy lane: simplifiers run per request on whole contours (pure Python,
+#: Wang–Müller super-linear), where a ccsm or original tile only slices stored rows.
+HEAVY_METHODS = frozenset({"dp", "wm", "vw"})
+
+
+@dataclass
+class RenderLanes:
+    """Two pools, so slow requests cannot hold up quick ones: ``light`` draws ccsm, original and morph
+    tiles (milliseconds each), ``heavy`` draws baseline tiles and ``/simplify`` (a whole dataset, or a
+    per-request simplifier). Each has its own workers, queue and deadline."""
+
+    light: RenderPool
+    heavy: RenderPool
+
+    def for_tile(self, method: str) -> RenderPool:
+        """The lane of a tile drawn with ``method``."""
+        return self.heavy if method in HEAVY_METHODS else self.light
+
+    async def start(self) -> None:
+        """Start both lanes' workers (they warm up side by side)."""
+        await asyncio.gather(self.light.start(), self.heavy.start())
+
+    async def close(self) -> None:
+        """Stop every worker."""
+        await self.light.close()
+        await self.heavy.close()
+
+
+def render_lanes_for(settings: Settings) -> RenderLanes:
+    """The lanes the settings ask for (not started)."""
+    config = render_config_for(settings)
+    queue, timeout = settings.render_queue, settings.request_timeout_s
+    return RenderLanes(
+        light=RenderPool(config, settings.render_workers, queue, timeout),
+        heavy=RenderPool(config, settings.heavy_render_workers, queue, timeout),
+    )
+
+
+def render_config_for(settings: Settings) -> RenderConfig:
+    """What the workers need from the settings."""
     from engine.serve.renderer import TileOptions
 
-    config = RenderConfig(
+    return RenderConfig(
         store_path=settings.store_path,
         tile=TileOptions(
             extent=settings.tile_extent,
@@ -260,9 +302,8 @@ def render_pool_for(settings: Settings) -> RenderPool:
         baseline_cache_entries=settings.baseline_cache_entries,
         wm_max_vertices=settings.wm_max_vertices,
     )
-    return RenderPool(config, settings.render_workers, settings.render_queue, settings.request_timeout_s)
 
 
-def get_render_pool(request: Request) -> RenderPool:
-    """The app's render pool (a request dependency)."""
-    return request.app.state.render_pool  # type: ignore[no-any-return]
+def get_render_lanes(request: Request) -> RenderLanes:
+    """The app's render lanes (a request dependency)."""
+    return request.app.state.render_lanes  # type: ignore[no-any-return]

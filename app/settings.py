@@ -63,10 +63,13 @@ class Settings(BaseSettings):
 
     # -- load: CPU work off the event loop (docs/service.md, "Under load") -------------------------------
     render_workers: int = Field(
-        2, ge=1, le=64, description="Worker processes drawing tiles and /simplify, per server process."
+        2, ge=1, le=64, description="Worker processes drawing ccsm, original and morph tiles, per server process."
+    )
+    heavy_render_workers: int = Field(
+        1, ge=1, le=64, description="Worker processes for baseline tiles (dp, wm, vw) and /simplify."
     )
     render_queue: int = Field(
-        8, ge=0, description="Requests that may wait for a busy render worker; beyond it: 503 at once."
+        8, ge=0, description="Requests that may wait for a busy render worker, per lane; beyond it: 503 at once."
     )
     request_timeout_s: float = Field(
         20.0,

@@ -8,7 +8,7 @@ from fastapi import APIRouter, Depends, Query, Request, Response
 
 from app.dependencies import MethodName, get_service, get_settings
 from app.render_jobs import SimplifyJob
-from app.render_pool import RenderPool, get_render_pool
+from app.render_pool import RenderLanes, get_render_lanes
 from app.responses import accepts_gzip, body_response, etag_matches, make_etag
 from app.service import DatasetService
 from app.settings import Settings
@@ -54,7 +54,7 @@ async def simplify(
     ],
     service: Annotated[DatasetService, Depends(get_service)],
     settings: Annotated[Settings, Depends(get_settings)],
-    pool: Annotated[RenderPool, Depends(get_render_pool)],
+    lanes: Annotated[RenderLanes, Depends(get_render_lanes)],
     dataset: Annotated[
         str | None, Query(description="Dataset id; default: the first configured dataset.", max_length=64)
     ] = None,
@@ -72,5 +72,5 @@ async def simplify(
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
-    result = await pool.run(SimplifyJob(ident, scale, box, method))
+    result = await lanes.heavy.run(SimplifyJob(ident, scale, box, method))
     return body_response(request, result.body or b"", "application/geo+json", headers)

@@ -11,7 +11,7 @@ from fastapi.responses import JSONResponse
 from app.dependencies import TileQuery, get_service, get_settings
 from app.public_url import public_base_url
 from app.render_jobs import MorphJob, TileJob
-from app.render_pool import RenderPool, get_render_pool
+from app.render_pool import RenderLanes, get_render_lanes
 from app.responses import accepts_gzip, body_response, etag_matches, make_etag
 from app.service import DatasetService, lonlat_bounds
 from app.settings import Settings
@@ -60,7 +60,7 @@ async def get_tile(
     q: Annotated[TileQuery, Depends()],
     service: Annotated[DatasetService, Depends(get_service)],
     settings: Annotated[Settings, Depends(get_settings)],
-    pool: Annotated[RenderPool, Depends(get_render_pool)],
+    lanes: Annotated[RenderLanes, Depends(get_render_lanes)],
 ) -> Response:
     """One Mapbox Vector Tile of a dataset's contours, generalized for the tile's (fractional) zoom."""
     renderer = service.renderer
@@ -83,7 +83,7 @@ async def get_tile(
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
-    result = await pool.run(TileJob(dataset, z, x, y, zoom, q.method, t))
+    result = await lanes.for_tile(q.method).run(TileJob(dataset, z, x, y, zoom, q.method, t))
     headers["X-Tile-Scale"] = f"{result.scale:.1f}"
     if result.body is None:
         return Response(status_code=204, headers=headers)
@@ -113,7 +113,7 @@ async def get_morph_tile(
     y: Annotated[int, Path(description="Tile row, 0 at the north edge (XYZ scheme).", ge=0)],
     service: Annotated[DatasetService, Depends(get_service)],
     settings: Annotated[Settings, Depends(get_settings)],
-    pool: Annotated[RenderPool, Depends(get_render_pool)],
+    lanes: Annotated[RenderLanes, Depends(get_render_lanes)],
 ) -> Response:
     """One morph tile: the CCSM contours at both ends of the zoom level with the same vertices, and their t
     through the level, so a client draws every zoom inside the level without asking again
@@ -125,7 +125,7 @@ async def get_morph_tile(
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
-    result = await pool.run(MorphJob(dataset, z, x, y))
+    result = await lanes.light.run(MorphJob(dataset, z, x, y))
     if result.body is None:
         return Response(status_code=204, headers=headers)
     return body_response(request, result.body, MVT_MEDIA_TYPE, headers)

@@ -137,7 +137,7 @@ def test_internal_error_is_generic(client, monkeypatch):
 
     from fastapi.testclient import TestClient
 
-    monkeypatch.setattr(client.app.state.service.renderer, "tile", boom)
+    monkeypatch.setattr(client.app.state.render_lanes.light, "run", boom)
     r = TestClient(client.app, raise_server_exceptions=False).get("/tiles/hills/12/1088/1598.mvt")
     assert r.status_code == 500
     assert r.json()["error"] == "internal_error" and "secret" not in r.text

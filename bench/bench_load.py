@@ -1,0 +1,238 @@
+"""Mixed-load benchmark of the service (issue 10, item 5): does any request stall another?
+
+Starts ``ccsm serve`` (real uvicorn on loopback) on the bundled sample, then runs two phases of the same
+length:
+
+1. **alone**: clients asking plain ccsm z12 tiles (no ETag, every request renders);
+2. **mix**: the same clients, plus hostile ones: every method at fractional zooms (wm, dp, vw, original),
+   ``/simplify`` at varied scales and methods, morph tiles; optionally uploads and deletes (``--token``,
+   once writes need one).
+
+Prints per route: requests, throughput, p50/p95/p99 and status counts; the p99 of the plain ccsm z12 tiles
+alone vs under the mix (goal: within 2x); and the largest ``/healthz`` latency seen during the mix, polled
+every 50 ms (goal: under 50 ms).
+
+Usage: python bench/bench_load.py [--seconds 30] [--clients 4] [--hostile 4] [--workers 1] [--token T]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import subprocess
+import sys
+import threading
+import time
+from collections import defaultdict
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import httpx
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+WORK = REPO / "var" / "bench"
+sys.path.insert(0, str(REPO))
+
+from tests.app.conftest import LiveServer  # noqa: E402
+from tests.app.helpers import tile_for  # noqa: E402
+
+
+@dataclass
+class Record:
+    """Latencies (seconds) and status codes per route label."""
+
+    lat: dict[str, list[float]] = field(default_factory=lambda: defaultdict(list))
+    status: dict[str, dict[int, int]] = field(default_factory=lambda: defaultdict(lambda: defaultdict(int)))
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def add(self, label: str, seconds: float, status: int) -> None:
+        with self.lock:
+            self.lat[label].append(seconds)
+            self.status[label][status] += 1
+
+
+def sample_store() -> Path:
+    """The sample built once into var/bench/load-sample.sqlite (``ccsm build``)."""
+    store = WORK / "load-sample.sqlite"
+    if not store.exists():
+        WORK.mkdir(parents=True, exist_ok=True)
+        print("building the sample store (once)...", flush=True)
+        subprocess.run(
+            [sys.executable, "-c", "from app.cli import main; main()", "build", "--store", str(store)],
+            cwd=REPO,
+            check=True,
+        )
+    return store
+
+
+def start(store: Path, workers: int, token: str | None) -> LiveServer:
+    env = {"CCSM_STORE_PATH": str(store)}
+    if token:
+        env["CCSM_ADMIN_TOKEN"] = token
+    server = LiveServer(env, args=["--workers", str(workers)], log=WORK / "bench-load-server.log")
+    server.wait_healthy(180)
+    server.wait_ready("sample")
+    return server
+
+
+def z12_tiles(base: str) -> list[tuple[int, int, int]]:
+    """The z12 tiles over the sample's extent that hold contours."""
+    west, south, east, north = httpx.get(f"{base}/datasets/sample").json()["bounds"]
+    z0, x0, y0 = tile_for(west, north, 12)
+    _, x1, y1 = tile_for(east, south, 12)
+    tiles = [(12, x, y) for x in range(x0, x1 + 1) for y in range(y0, y1 + 1)]
+    return [t for t in tiles if httpx.get("{}/tiles/sample/{}/{}/{}.mvt".format(base, *t)).status_code == 200]
+
+
+def loop(stop: threading.Event, client: httpx.Client, rec: Record, pick: Callable[[], tuple[str, str]]) -> None:
+    """Ask ``pick()`` (label, path) requests one after another until ``stop``."""
+    while not stop.is_set():
+        label, path = pick()
+        t0 = time.perf_counter()
+        try:
+            status = client.get(path).status_code
+        except httpx.HTTPError:
+            status = 0
+        rec.add(label, time.perf_counter() - t0, status)
+
+
+def hostile_picker(base: str, center: tuple[float, float], rng: random.Random) -> Callable[[], tuple[str, str]]:
+    """Random expensive requests: baselines at fractional zooms, /simplify, morph tiles, original."""
+    lon, lat = center
+
+    def pick() -> tuple[str, str]:
+        kind = rng.choice(["wm", "dp", "vw", "original", "simplify", "morph", "ccsm-frac"])
+        z = rng.randint(8, 14)
+        _, x, y = tile_for(lon + rng.uniform(-0.08, 0.08), lat + rng.uniform(-0.06, 0.06), z)
+        frac = round(z + rng.random() * 0.99, 3)
+        if kind == "simplify":
+            scale = rng.choice([100_000, 250_000, 500_000, 1_000_000]) * rng.uniform(0.9, 1.1)
+            method = rng.choice(["ccsm", "dp", "vw", "wm"])
+            return f"simplify {method}", f"{base}/simplify?scale={scale:.0f}&method={method}"
+        if kind == "morph":
+            return "morph tile", f"{base}/morph/sample/{z}/{x}/{y}.mvt"
+        if kind == "ccsm-frac":
+            return "ccsm tile, fractional zoom", f"{base}/tiles/sample/{z}/{x}/{y}.mvt?zoom={frac}"
+        return f"{kind} tile", f"{base}/tiles/sample/{z}/{x}/{y}.mvt?method={kind}&zoom={frac}"
+
+    return pick
+
+
+def writer_loop(stop: threading.Event, base: str, token: str, rec: Record) -> None:
+    """Upload a small dataset, wait for it, delete it; again until ``stop`` (only with --token)."""
+    from tests.app.conftest import synthetic_features
+
+    body = json.dumps({"type": "FeatureCollection", "features": synthetic_features(seed=5)[:6]})
+    headers = {"authorization": f"Bearer {token}", "content-type": "application/geo+json"}
+    n = 0
+    with httpx.Client(timeout=60) as client:
+        while not stop.is_set():
+            n += 1
+            t0 = time.perf_counter()
+            r = client.post(f"{base}/datasets?id=bench-up-{n}", content=body, headers=headers)
+            rec.add("POST /datasets", time.perf_counter() - t0, r.status_code)
+            ready_by = time.monotonic() + 60
+            while not stop.is_set() and time.monotonic() < ready_by:
+                if client.get(f"{base}/datasets/bench-up-{n}").json().get("state") != "building":
+                    break
+                time.sleep(0.2)
+            t0 = time.perf_counter()
+            r = client.delete(f"{base}/datasets/bench-up-{n}", headers=headers)
+            rec.add("DELETE /datasets", time.perf_counter() - t0, r.status_code)
+
+
+def health_loop(stop: threading.Event, base: str, out: list[float]) -> None:
+    with httpx.Client(timeout=30) as client:
+        while not stop.is_set():
+            t0 = time.perf_counter()
+            client.get(f"{base}/healthz")
+            out.append(time.perf_counter() - t0)
+            time.sleep(0.05)
+
+
+def run_phase(
+    base: str, tiles: list[tuple[int, int, int]], args: argparse.Namespace, mix: bool
+) -> tuple[Record, list[float], float]:
+    """Run the plain clients (and with ``mix`` the hostile ones and the /healthz poller) for --seconds."""
+    rec = Record()
+    stop = threading.Event()
+    health: list[float] = []
+    threads = []
+    info = httpx.get(f"{base}/datasets/sample").json()
+    center = (info["center"][0], info["center"][1])
+    for i in range(args.clients):
+        rng = random.Random(i)
+        client = httpx.Client(timeout=120)
+
+        def plain(rng: random.Random = rng) -> tuple[str, str]:
+            return "ccsm z12 tile", "{}/tiles/sample/{}/{}/{}.mvt".format(base, *rng.choice(tiles))
+
+        threads.append(threading.Thread(target=loop, args=(stop, client, rec, plain)))
+    if mix:
+        for i in range(args.hostile):
+            client = httpx.Client(timeout=120)
+            pick = hostile_picker(base, center, random.Random(100 + i))
+            threads.append(threading.Thread(target=loop, args=(stop, client, rec, pick)))
+        threads.append(threading.Thread(target=health_loop, args=(stop, base, health)))
+        if args.token:
+            threads.append(threading.Thread(target=writer_loop, args=(stop, base, args.token, rec)))
+    t0 = time.perf_counter()
+    for t in threads:
+        t.start()
+    time.sleep(args.seconds)
+    stop.set()
+    for t in threads:
+        t.join()
+    return rec, health, time.perf_counter() - t0
+
+
+def pct(values: list[float], q: float) -> float:
+    return float(np.percentile(np.array(values) * 1000, q)) if values else float("nan")
+
+
+def report(title: str, rec: Record, seconds: float) -> None:
+    print(f"\n{title} ({seconds:.0f} s)")
+    print(f"  {'route':30s} {'n':>6s} {'req/s':>7s} {'p50 ms':>8s} {'p95 ms':>8s} {'p99 ms':>8s}  statuses")
+    for label in sorted(rec.lat):
+        lat = rec.lat[label]
+        codes = " ".join(f"{k}:{v}" for k, v in sorted(rec.status[label].items()))
+        print(
+            f"  {label:30s} {len(lat):6d} {len(lat) / seconds:7.1f} {pct(lat, 50):8.1f} {pct(lat, 95):8.1f} "
+            f"{pct(lat, 99):8.1f}  {codes}"
+        )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--seconds", type=float, default=30.0, help="length of each phase")
+    parser.add_argument("--clients", type=int, default=4, help="clients asking plain ccsm z12 tiles")
+    parser.add_argument("--hostile", type=int, default=4, help="clients asking expensive requests (mix)")
+    parser.add_argument("--workers", type=int, default=1, help="uvicorn worker processes")
+    parser.add_argument("--token", default=None, help="admin token: add uploads and deletes to the mix")
+    args = parser.parse_args()
+    store = sample_store()
+    server = start(store, args.workers, args.token)
+    try:
+        base = server.url
+        tiles = z12_tiles(base)
+        print(f"server {base}, {args.workers} uvicorn worker(s); {len(tiles)} z12 tiles with contours; "
+              f"{args.clients} plain clients, {args.hostile} hostile clients, {os.cpu_count()} cores")
+        alone, _, s_alone = run_phase(base, tiles, args, mix=False)
+        report("alone: plain ccsm z12 tiles", alone, s_alone)
+        mixed, health, s_mix = run_phase(base, tiles, args, mix=True)
+        report("mix: plain tiles + hostile requests", mixed, s_mix)
+        p_alone, p_mix = pct(alone.lat["ccsm z12 tile"], 99), pct(mixed.lat["ccsm z12 tile"], 99)
+        print(f"\nccsm z12 p99: alone {p_alone:.1f} ms, under the mix {p_mix:.1f} ms "
+              f"({p_mix / p_alone:.2f}x; goal <= 2x)")
+        print(f"/healthz during the mix: {len(health)} polls, max {max(health) * 1000:.1f} ms, "
+              f"p99 {pct(health, 99):.1f} ms (goal < 50 ms)")
+    finally:
+        server.stop()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,262 @@
+"""Issue 10, "no request can stall another", against a real server on loopback.
+
+The repro of the issue was one 1,000,000-vertex line asked at z2 with ``method=wm``: minutes of work on
+the event loop, ``/healthz`` waiting meanwhile. Here a 60,000-vertex line (about 10 s of Wang–Müller on this
+machine) plays that part, so the tests stay short: with the default limit the request is refused, and with
+the limit lifted and a 2 s deadline it is cut off while ``/healthz`` keeps answering.
+
+The latency bound on ``/healthz`` (1 s) is a behaviour bound, not a speed claim: a blocked event loop would
+hold it for the whole 10 s of the heavy request.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import httpx
+import numpy as np
+import psutil
+import pytest
+
+from engine.serve.datasets import SourceSpec, build_dataset
+from engine.store.sqlite import CCSStore
+from tests.app.conftest import LAT0, LON0, LiveServer
+from tests.app.helpers import tile_for
+
+#: Vertices of the giant line: above the default wm limit (50,000), and slow enough for wm to pass a 2 s
+#: deadline by far.
+GIANT_VERTICES = 60_000
+#: The admin token the writes work will ask for; harmless before it lands.
+TOKEN = "test-token-issue-10"
+
+
+def giant_line(n: int) -> dict:
+    """One wiggly open contour of ``n`` vertices, a degree long, across the synthetic hills' latitude."""
+    rng = np.random.default_rng(10)
+    x = np.linspace(LON0 - 0.5, LON0 + 0.5, n)
+    y = LAT0 + 0.01 * np.sin(np.linspace(0, 400, n)) + np.cumsum(rng.standard_normal(n)) * 2e-6
+    return {
+        "type": "Feature",
+        "properties": {"id": "giant", "elevation": 500},
+        "geometry": {"type": "LineString", "coordinates": np.round(np.column_stack([x, y]), 7).tolist()},
+    }
+
+
+@pytest.fixture(scope="module")
+def giant_store(tmp_path_factory: pytest.TempPathFactory, built_store: Path) -> tuple[Path, Path]:
+    """A store holding 'hills' and 'giant' (one 60,000-vertex line), and the giant source file."""
+    d = tmp_path_factory.mktemp("giant")
+    src = d / "giant.geojson"
+    src.write_text(json.dumps({"type": "FeatureCollection", "features": [giant_line(GIANT_VERTICES)]}))
+    store = d / "ccsm.sqlite"
+    CCSStore(built_store)._con().execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    shutil.copy(built_store, store)
+    build_dataset(CCSStore(store), SourceSpec(src, "giant", "giant"), workers=1)
+    return store, src
+
+
+def start_server(store: Path, sources: list[Path], log: Path, **env: str) -> LiveServer:
+    server = LiveServer(
+        {
+            "CCSM_STORE_PATH": str(store),
+            "CCSM_SOURCES": ",".join(str(s) for s in sources),
+            "CCSM_BUILD_WORKERS": "1",
+            "CCSM_ADMIN_TOKEN": TOKEN,
+            **env,
+        },
+        log=log,
+    )
+    server.wait_healthy(120)
+    server.wait_ready("giant")
+    return server
+
+
+@pytest.fixture(scope="module")
+def strict(giant_store, synthetic_path, tmp_path_factory) -> Iterator[LiveServer]:
+    """Default limits; the Host header of requests is hostile in some tests."""
+    store, src = giant_store
+    copy = tmp_path_factory.mktemp("strict") / "ccsm.sqlite"
+    shutil.copy(store, copy)
+    server = start_server(copy, [synthetic_path, src], copy.with_name("server.log"))
+    try:
+        yield server
+    finally:
+        server.stop()
+
+
+@pytest.fixture(scope="module")
+def lenient(giant_store, synthetic_path, tmp_path_factory) -> Iterator[LiveServer]:
+    """wm limit lifted, a 2 s deadline, one worker per lane and no queue: the heavy request meets the
+    deadline, and another heavy request meanwhile finds its lane full."""
+    store, src = giant_store
+    copy = tmp_path_factory.mktemp("lenient") / "ccsm.sqlite"
+    shutil.copy(store, copy)
+    server = start_server(
+        copy,
+        [synthetic_path, src],
+        copy.with_name("server.log"),
+        CCSM_WM_MAX_VERTICES="10000000",
+        CCSM_REQUEST_TIMEOUT_S="2",
+        CCSM_RENDER_WORKERS="1",
+        CCSM_HEAVY_RENDER_WORKERS="1",
+        CCSM_RENDER_QUEUE="0",
+    )
+    try:
+        yield server
+    finally:
+        server.stop()
+
+
+def z2_tile() -> tuple[int, int, int]:
+    return tile_for(LON0, LAT0, 2)
+
+
+def test_issue_10_wm_on_a_giant_line_is_refused_naming_the_limit(strict):
+    z, x, y = z2_tile()
+    r = httpx.get(f"{strict.url}/tiles/giant/{z}/{x}/{y}.mvt?method=wm", timeout=30)
+    assert r.status_code == 400
+    detail = r.json()["detail"]
+    assert "60,000 vertices" in detail and "50,000" in detail and "wm_max_vertices" in detail
+    r = httpx.get(f"{strict.url}/simplify?dataset=giant&method=wm&scale=100000000", timeout=30)
+    assert r.status_code == 400 and "wm_max_vertices" in r.json()["detail"]
+    # The other methods still draw the same line.
+    assert httpx.get(f"{strict.url}/tiles/giant/{z}/{x}/{y}.mvt?method=dp", timeout=30).status_code == 200
+    assert httpx.get(f"{strict.url}/tiles/giant/{z}/{x}/{y}.mvt", timeout=30).status_code == 200
+
+
+def render_workers(server: LiveServer) -> set[int]:
+    """Pids of the server's render workers: the children of its fork server."""
+    for child in psutil.Process(server.proc.pid).children():
+        if "forkserver" in " ".join(child.cmdline()):
+            return {w.pid for w in child.children() if w.status() != psutil.STATUS_ZOMBIE}
+    return set()
+
+
+def alive(pid: int) -> bool:
+    try:
+        return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return False
+
+
+def test_issue_10_wm_giant_line_does_not_block_healthz_and_is_cut_at_the_deadline(lenient):
+    z, x, y = z2_tile()
+    hills = tile_for(LON0, LAT0, 12)
+    before = render_workers(lenient)
+    assert len(before) == 2  # one light, one heavy
+    heavy: dict[str, object] = {}
+
+    def ask_heavy() -> None:
+        start = time.monotonic()
+        r = httpx.get(f"{lenient.url}/tiles/giant/{z}/{x}/{y}.mvt?method=wm", timeout=60)
+        heavy.update(response=r, seconds=time.monotonic() - start)
+
+    thread = threading.Thread(target=ask_heavy)
+    thread.start()
+    time.sleep(0.5)  # the heavy request is in the heavy worker now
+    health: list[float] = []
+    light: list[int] = []
+    busy = None
+    while thread.is_alive():
+        start = time.monotonic()
+        r = httpx.get(lenient.url + "/healthz", timeout=10)
+        health.append(time.monotonic() - start)
+        assert r.status_code == 200
+        if busy is None:  # the heavy lane's one worker is taken and there is no queue: 503 at once
+            t0 = time.monotonic()
+            busy = httpx.get(f"{lenient.url}/simplify?dataset=hills&scale=250000", timeout=10)
+            busy_seconds = time.monotonic() - t0
+        light.append(httpx.get("{}/tiles/hills/{}/{}/{}.mvt".format(lenient.url, *hills), timeout=10).status_code)
+        time.sleep(0.02)
+    thread.join()
+    assert len(health) >= 5 and max(health) < 1.0, health
+    assert light and set(light) == {200}  # the light lane kept drawing ccsm tiles meanwhile
+    assert busy is not None and busy.status_code == 503 and "busy" in busy.json()["detail"]
+    assert busy.headers["retry-after"] and busy_seconds < 1.0
+    r = heavy["response"]
+    assert isinstance(r, httpx.Response)
+    assert r.status_code == 503, r.text
+    assert "deadline" in r.json()["detail"] and r.headers["retry-after"]
+    assert heavy["seconds"] < 8.0  # a 2 s deadline; wm alone takes about 10 s on this line
+    # The work stopped: the heavy worker is gone (killed, not left running), and a fresh one replaces it.
+    gone = time.monotonic() + 5
+    while all(alive(p) for p in before):
+        assert time.monotonic() < gone, "the worker of the late request still runs"
+        time.sleep(0.1)
+    assert sum(alive(p) for p in before) == 1
+    deadline = time.monotonic() + 60
+    while True:
+        r = httpx.get(f"{lenient.url}/simplify?dataset=hills&scale=250000", timeout=10)
+        if r.status_code != 503 or time.monotonic() > deadline:
+            break
+        time.sleep(0.2)
+    assert r.status_code == 200
+    after = render_workers(lenient)
+    assert len(after) == 2 and len(after - before) == 1
+
+
+GET_ROUTES = [
+    "/healthz",
+    "/datasets",
+    "/datasets/hills",
+    "/tiles/hills/tilejson.json",
+    "/morph/hills/tilejson.json",
+    "/simplify?scale=250000&dataset=hills",
+    "/docs",
+    "/openapi.json",
+    "/",
+]
+
+
+@pytest.mark.parametrize("path", GET_ROUTES + ["TILE", "MORPH"])
+def test_head_answers_like_get_without_a_body(strict, path):
+    z, x, y = tile_for(LON0, LAT0, 12)
+    path = {"TILE": f"/tiles/hills/{z}/{x}/{y}.mvt", "MORPH": f"/morph/hills/{z}/{x}/{y}.mvt"}.get(path, path)
+    get = httpx.get(strict.url + path, timeout=30)
+    head = httpx.head(strict.url + path, timeout=30)
+    assert get.status_code == 200
+    assert head.status_code == 200 and head.content == b""
+    for name in ("content-type", "content-length", "etag", "cache-control"):
+        assert head.headers.get(name) == get.headers.get(name), name
+
+
+def test_tilejson_ignores_a_hostile_host_header(strict):
+    hostile = {"host": "evil.example", "x-forwarded-host": "evil.example", "x-forwarded-proto": "https"}
+    for kind in ("tiles", "morph"):
+        r = httpx.get(f"{strict.url}/{kind}/hills/tilejson.json", headers=hostile, timeout=30)
+        assert r.status_code == 200
+        assert "evil" not in r.text
+        assert r.json()["tiles"][0].startswith(f"{strict.url}/{kind}/hills/{{z}}/{{x}}/{{y}}.mvt")
+
+
+def test_tilejson_uses_the_configured_public_url(giant_store, synthetic_path, tmp_path):
+    store, src = giant_store
+    copy = tmp_path / "ccsm.sqlite"
+    shutil.copy(store, copy)
+    server = start_server(
+        copy, [synthetic_path, src], tmp_path / "server.log", CCSM_PUBLIC_URL="https://tiles.example.org/ccsm/"
+    )
+    try:
+        r = httpx.get(server.url + "/tiles/hills/tilejson.json", headers={"host": "evil.example"})
+        assert r.json()["tiles"][0].startswith("https://tiles.example.org/ccsm/tiles/hills/{z}/{x}/{y}.mvt?")
+    finally:
+        server.stop()
+
+
+def test_docs_page_needs_no_outside_network(strict):
+    r = httpx.get(strict.url + "/docs", timeout=30)
+    assert r.status_code == 200 and "SwaggerUIBundle" in r.text
+    assert "://" not in r.text  # every script, style and icon is served by the service itself
+    assert '"validatorUrl": null' in r.text  # no validator badge calling out
+    assets = [a.split('"')[0] for a in r.text.split('src="')[1:] + r.text.split('href="')[1:]]
+    assert len(assets) >= 3
+    for path in assets:
+        assert path.startswith("/")
+        got = httpx.get(strict.url + path, timeout=30)
+        assert got.status_code == 200 and len(got.content) > 500, path
+    assert httpx.get(strict.url + "/redoc", timeout=30).status_code == 404
