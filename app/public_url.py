@@ -27,11 +27,11 @@ def public_base_url(request: Request, settings: Settings) -> str:
         proto = request.headers.get("x-forwarded-proto", "").split(",")[0].strip().lower()
         if host and _HOST.match(host):
             return f"{proto if proto in ('http', 'https') else 'http'}://{host}"
+    # The socket the request came in on. Plain http: `ccsm serve` does not terminate TLS, and the request's
+    # scheme may have been rewritten from an X-Forwarded-Proto header, which is not trusted here.
     server = request.scope.get("server")
     if server and server[0]:
         host, port = server[0], server[1]
         host = f"[{host}]" if ":" in host else host
-        scheme = request.url.scheme if request.url.scheme in ("http", "https") else "http"
-        default = (scheme == "http" and port == 80) or (scheme == "https" and port == 443)
-        return f"{scheme}://{host}" if default or port is None else f"{scheme}://{host}:{port}"
+        return f"http://{host}" if port in (80, None) else f"http://{host}:{port}"
     return ""
