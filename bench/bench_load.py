@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing
 import os
 import random
 import subprocess
@@ -28,6 +29,7 @@ import time
 from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
 from pathlib import Path
 
 import httpx
@@ -145,19 +147,24 @@ def writer_loop(stop: threading.Event, base: str, token: str, rec: Record) -> No
             rec.add("DELETE /datasets", time.perf_counter() - t0, r.status_code)
 
 
-def health_loop(stop: threading.Event, base: str, out: list[float]) -> None:
+def health_probe(base: str, seconds: float, conn: Connection) -> None:
+    """Poll /healthz every 50 ms for ``seconds``; send the latencies back. It runs in a process of its own,
+    so the load clients' threads (and their GIL) do not add to what it measures."""
+    out: list[float] = []
+    end = time.monotonic() + seconds
     with httpx.Client(timeout=30) as client:
-        while not stop.is_set():
+        while time.monotonic() < end:
             t0 = time.perf_counter()
             client.get(f"{base}/healthz")
             out.append(time.perf_counter() - t0)
             time.sleep(0.05)
+    conn.send(out)
 
 
 def run_phase(
     base: str, tiles: list[tuple[int, int, int]], args: argparse.Namespace, mix: bool
 ) -> tuple[Record, list[float], float]:
-    """Run the plain clients (and with ``mix`` the hostile ones and the /healthz poller) for --seconds."""
+    """Run the plain clients (and with ``mix`` the hostile ones and the /healthz probe) for --seconds."""
     rec = Record()
     stop = threading.Event()
     health: list[float] = []
@@ -177,13 +184,21 @@ def run_phase(
             client = httpx.Client(timeout=120)
             pick = hostile_picker(base, center, random.Random(100 + i))
             threads.append(threading.Thread(target=loop, args=(stop, client, rec, pick)))
-        threads.append(threading.Thread(target=health_loop, args=(stop, base, health)))
         if args.token:
             threads.append(threading.Thread(target=writer_loop, args=(stop, base, args.token, rec)))
     t0 = time.perf_counter()
     for t in threads:
         t.start()
+    if mix:
+        mine, theirs = multiprocessing.Pipe()
+        probe = multiprocessing.get_context("spawn").Process(
+            target=health_probe, args=(base, args.seconds, theirs)
+        )
+        probe.start()
     time.sleep(args.seconds)
+    if mix:
+        health = mine.recv()
+        probe.join()
     stop.set()
     for t in threads:
         t.join()
