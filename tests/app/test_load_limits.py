@@ -5,7 +5,7 @@ the event loop, ``/healthz`` waiting meanwhile. Here a 60,000-vertex line (about
 machine) plays that part, so the tests stay short: with the default limit the request is refused, and with
 the limit lifted and a 2 s deadline it is cut off while ``/healthz`` keeps answering.
 
-The latency bound on ``/healthz`` (1 s) is a behaviour bound, not a speed claim: a blocked event loop would
+The latency bound on ``/healthz`` (2 s) is a behaviour bound, not a speed claim: a blocked event loop would
 hold it for the whole 10 s of the heavy request.
 """
 
@@ -31,6 +31,10 @@ from tests.app.helpers import tile_for
 #: Vertices of the giant line: above the default wm limit (50,000), and slow enough for wm to pass a 2 s
 #: deadline by far.
 GIANT_VERTICES = 60_000
+#: Bound on /healthz (and on a 503 for a full lane) while the heavy request runs. A behaviour bound, not a
+#: speed claim: a blocked event loop holds /healthz for the whole ~10 s of wm on the giant line, while on a
+#: shared, loaded 2-core machine a free loop still answers in well under a second.
+HEALTH_BOUND_S = 2.0
 #: The admin token the writes work will ask for; harmless before it lands.
 TOKEN = "test-token-issue-10"
 
@@ -180,10 +184,10 @@ def test_issue_10_wm_giant_line_does_not_block_healthz_and_is_cut_at_the_deadlin
         time.sleep(0.05)
     thread.join()
     poller.join()
-    assert len(health) >= 3 and max(health) < 1.0, health
-    assert light and set(light) == {200}  # the light lane kept drawing ccsm tiles meanwhile
     assert busy.status_code == 503 and "busy" in busy.json()["detail"]
-    assert busy.headers["retry-after"] and busy_seconds < 1.0
+    assert busy.headers["retry-after"] and busy_seconds < HEALTH_BOUND_S
+    assert len(health) >= 3 and max(health) < HEALTH_BOUND_S, health
+    assert light and set(light) == {200}  # the light lane kept drawing ccsm tiles meanwhile
     r = heavy["response"]
     assert isinstance(r, httpx.Response)
     assert r.status_code == 503, r.text
