@@ -2,8 +2,9 @@
 
 Starts ``ccsm serve --workers N`` (default 2) on the bundled sample and runs clients asking tiles of every
 method at fractional zooms, morph tiles and ``/simplify``. Every ``--every`` seconds it prints the requests
-so far, the errors (5xx other than a deadline/busy 503, and transport failures), the 503s, and the RSS of
-the server and of all its processes (uvicorn workers, render workers). Goal: 0 errors, RSS flat after warm-up.
+so far, the errors (5xx other than a deadline/busy 503, and transport failures), the 503s, and the memory
+of the server and of all its processes (uvicorn workers, render workers): RSS, and PSS, which counts the
+pages the forked render workers share once. Goal: 0 errors, memory flat after warm-up.
 
 Usage: python bench/soak.py [--minutes 10] [--workers 2] [--clients 4] [--every 30]
 """
@@ -57,17 +58,22 @@ def client_loop(stop: threading.Event, base: str, center: tuple[float, float], s
             counts.add(status, path)
 
 
-def rss_mb(pid: int) -> tuple[float, float]:
-    """(RSS of the server process, RSS of it and all its descendants), MB."""
+def memory_mb(pid: int) -> tuple[float, float, float]:
+    """(RSS of the server process, RSS summed over it and all its descendants, PSS summed likewise), MB.
+
+    The render workers are forked from one fork server and share its pages (the engine, numba's code), so
+    summed RSS counts those pages once per worker; PSS shares them out and adds up to the real total.
+    """
     root = psutil.Process(pid)
-    procs = [root, *root.children(recursive=True)]
-    total = 0
-    for p in procs:
+    rss = pss = 0
+    for p in [root, *root.children(recursive=True)]:
         try:
-            total += p.memory_info().rss
+            info = p.memory_full_info()
         except psutil.NoSuchProcess:
-            pass
-    return root.memory_info().rss / 2**20, total / 2**20
+            continue
+        rss += info.rss
+        pss += getattr(info, "pss", info.rss)
+    return root.memory_info().rss / 2**20, rss / 2**20, pss / 2**20
 
 
 def main() -> None:
@@ -91,14 +97,17 @@ def main() -> None:
             t.start()
         t0 = time.monotonic()
         print(f"soak: {args.minutes:g} min, {args.workers} uvicorn workers, {args.clients} clients, {server.url}")
-        print(f"{'t (s)':>6s} {'requests':>9s} {'errors':>7s} {'503':>5s} {'server RSS MB':>14s} {'all RSS MB':>11s}")
+        print(
+            f"{'t (s)':>6s} {'requests':>9s} {'errors':>7s} {'503':>5s} {'server RSS MB':>14s} "
+            f"{'all RSS MB':>11s} {'all PSS MB':>11s}"
+        )
         end = t0 + args.minutes * 60
         while time.monotonic() < end:
             time.sleep(min(args.every, max(end - time.monotonic(), 0)))
-            own, total = rss_mb(server.proc.pid)
+            own, rss, pss = memory_mb(server.proc.pid)
             print(
                 f"{time.monotonic() - t0:6.0f} {counts.requests:9d} {counts.errors:7d} {counts.busy:5d} "
-                f"{own:14.0f} {total:11.0f}",
+                f"{own:14.0f} {rss:11.0f} {pss:11.0f}",
                 flush=True,
             )
         stop.set()
