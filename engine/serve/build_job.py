@@ -11,11 +11,12 @@ on that row and writes the dataset only while the row is there (:meth:`CCSStore.
 
 from __future__ import annotations
 
-import ctypes
 import json
 import logging
+import os
 import signal
 import sys
+import threading
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -30,8 +31,8 @@ log = logging.getLogger("ccsm.build")
 
 #: Seconds between two progress writes to the store (each is a small write transaction).
 PROGRESS_EVERY_S = 0.25
-#: Linux prctl option: a signal for this process when its parent dies (a killed server takes its builds along).
-_PR_SET_PDEATHSIG = 1
+#: Seconds between two checks that the server that started the build is still there.
+PARENT_CHECK_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -138,10 +139,19 @@ def run(job: BuildJob) -> int:
 
 
 def _die_with_parent() -> None:
-    try:
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
-    except (OSError, AttributeError):
-        pass  # not Linux: the service still ends its builds on shutdown
+    """End this build's process group once the server that started it is gone (even killed with SIGKILL).
+
+    (Linux's PR_SET_PDEATHSIG would fire when the server *thread* that started the build ends, not the
+    server, so the parent is watched instead.)
+    """
+    parent = os.getppid()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(PARENT_CHECK_S)
+        os.killpg(0, signal.SIGTERM)
+
+    threading.Thread(target=watch, name="ccsm-parent-watch", daemon=True).start()
 
 
 def main() -> None:
