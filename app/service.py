@@ -86,6 +86,10 @@ def open_checked_store(path: Path) -> CCSStore:
         store = CCSStore(path)
         problem = store.quick_check()
     except StoreError as exc:
+        if _read_only(path.parent):  # not damaged: moving it aside would lose it
+            raise StoreUnwritable(
+                f"store {path.name} is on a read-only file system; make {path.parent} writable and restart"
+            ) from exc
         raise StoreError(f"{exc}; {advice}") from exc
     if problem != "ok":
         store.close()
@@ -284,7 +288,7 @@ class DatasetService:
             self.upload_dir.mkdir(parents=True, exist_ok=True)
             path.write_bytes(body)
         except OSError as exc:
-            path.unlink(missing_ok=True)
+            _remove(path)
             reason = unwritable_reason(exc)
             if reason is None:
                 raise
@@ -402,6 +406,8 @@ class DatasetService:
             self.store.probe_write()
         except StoreError as exc:
             problems.append(str(exc))
+        if _read_only(self.upload_dir if self.upload_dir.is_dir() else self.upload_dir.parent):
+            problems.append(f"the upload folder {self.upload_dir.name}/ is on a read-only file system")
         free = _free_bytes(self.settings.store_path.parent)
         if free is not None and free < self.settings.max_upload_bytes:
             problems.append(
@@ -414,6 +420,21 @@ class DatasetService:
             elif self.store.data_version(ident) is None:
                 problems.append(f"dataset {ident!r} is being built ({st.done}/{st.total} contours)")
         return problems
+
+
+def _remove(path: Path) -> None:
+    """Remove a file if it is there and can be (a read-only file system cannot hold a partial one anyway)."""
+    try:
+        path.unlink(missing_ok=True)
+    except OSError as exc:
+        log.warning("cannot remove %s: %s", path.name, exc)
+
+
+def _read_only(folder: Path) -> bool:
+    try:
+        return bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
+    except OSError:
+        return False
 
 
 def _free_bytes(folder: Path) -> int | None:

@@ -16,7 +16,7 @@ from fastapi.testclient import TestClient
 
 from app.main import create_app
 from engine.store.sqlite import CCSStore
-from tests.app.conftest import LiveServer, make_settings, synthetic_features, write_geojson
+from tests.app.conftest import LiveServer, make_settings, synthetic_features
 
 GEOJSON = {"content-type": "application/geo+json"}
 BODY = json.dumps({"type": "FeatureCollection", "features": synthetic_features(seed=4)[:3]})
