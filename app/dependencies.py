@@ -9,14 +9,18 @@ from fastapi import Query, Request
 
 from app.service import DatasetService
 from app.settings import Settings
+from engine.errors import StoreNotReady
 from engine.types import Method
 
 MethodName = Method
 
 
 def get_service(request: Request) -> DatasetService:
-    """The DatasetService the lifespan put on the app."""
-    return request.app.state.service  # type: ignore[no-any-return]
+    """The DatasetService the lifespan put on the app (StoreNotReady, 503, when the store is unusable)."""
+    service: DatasetService | None = request.app.state.service
+    if service is None:
+        raise StoreNotReady(request.app.state.store_problem or "the store is not open")
+    return service
 
 
 def get_settings(request: Request) -> Settings:

@@ -23,6 +23,7 @@ from engine.errors import (
     SourceError,
     StoreError,
     StoreNotReady,
+    StoreUnwritable,
     SurfaceFitError,
     TileOutOfRange,
     UnknownLayer,
@@ -43,6 +44,22 @@ class DatasetExists(CCSMError):
     """A dataset of that id exists already."""
 
 
+class BuildQueueFull(CCSMError):
+    """Every build slot is busy and the queue of builds is full: try again later."""
+
+
+class NotAuthenticated(CCSMError):
+    """A write without the bearer token CCSM_ADMIN_TOKEN asks for (or with a wrong one)."""
+
+
+class WriteForbidden(CCSMError):
+    """A write from a client that may not write (no token is configured and the client is not local)."""
+
+
+class UnsupportedMediaType(CCSMError):
+    """A write whose Content-Type is not JSON (a browser could send it cross-site without asking)."""
+
+
 #: The one table: engine (and app) error class -> HTTP status. The first matching class in MRO order wins.
 STATUS_CODES: dict[type[Exception], int] = {
     TileOutOfRange: 404,
@@ -51,8 +68,13 @@ STATUS_CODES: dict[type[Exception], int] = {
     InvalidContour: 400,
     SourceError: 400,
     MalformedUpload: 400,
+    NotAuthenticated: 401,
+    WriteForbidden: 403,
     DatasetExists: 409,
     UploadTooLarge: 413,
+    UnsupportedMediaType: 415,
+    BuildQueueFull: 429,
+    StoreUnwritable: 507,
     SurfaceFitError: 422,
     StoreNotReady: 503,
     StoreError: 503,
@@ -69,6 +91,26 @@ def public_message(message: str) -> str:
     'upload.geojson: cannot read contours'
     """
     return _PATH.sub(lambda m: m.group(1), message)[:1000]
+
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]")
+
+
+def log_safe(text: object) -> str:
+    """Text from a request made safe for one log line: control characters (newlines, ANSI escapes) escaped.
+
+    >>> log_safe("a\nb\x1b[31m")
+    'a\\nb\\x1b[31m'
+    """
+    return _CONTROL.sub(lambda m: m.group().encode("unicode_escape").decode("ascii"), str(text))
+
+
+#: Extra headers of some answers: when to retry, how to authenticate.
+_HEADERS = {
+    503: {"Retry-After": "5"},
+    429: {"Retry-After": "30"},
+    401: {"WWW-Authenticate": 'Bearer realm="ccsm"'},
+}
 
 
 def request_id(request: Request) -> str:
@@ -98,9 +140,11 @@ async def ccsm_error_handler(request: Request, exc: Exception) -> JSONResponse:
     status = status_for(exc)
     if status >= 500 and not isinstance(exc, (StoreNotReady, StoreError)):
         log.exception("request %s failed", request_id(request), exc_info=exc)
+    elif status == 507:
+        log.error("%s %s -> 507 %s", request.method, log_safe(request.url.path), log_safe(exc))
     else:
-        log.info("%s %s -> %d %s", request.method, request.url.path, status, exc)
-    headers = {"Retry-After": "5"} if status == 503 else None
+        log.info("%s %s -> %d %s", request.method, log_safe(request.url.path), status, log_safe(exc))
+    headers = _HEADERS.get(status)
     return JSONResponse(error_body(request, _kind(exc), public_message(str(exc))), status, headers=headers)
 
 

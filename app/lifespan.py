@@ -1,4 +1,5 @@
-"""Startup and shutdown: open the store once, start background builds of missing or changed sources."""
+"""Startup and shutdown: open and check the store once, queue builds of missing or changed sources, and end
+every build when the server stops."""
 
 from __future__ import annotations
 
@@ -9,20 +10,33 @@ from contextlib import asynccontextmanager
 from fastapi import FastAPI
 
 from app.service import DatasetService
+from engine.errors import StoreError
 
 log = logging.getLogger("ccsm.app")
 
 
 @asynccontextmanager
 async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-    """Open the store and keep the DatasetService on ``app.state``; builds never block startup."""
+    """Keep the DatasetService on ``app.state``; builds never block startup.
+
+    A store that cannot be opened or is damaged does not crash the process (a restart would only crash
+    again): the reason is logged once, ``/readyz`` reports it and every data route answers 503 with it.
+    """
     settings = app.state.settings
-    service = DatasetService(settings)
+    app.state.store_problem = None
+    try:
+        service: DatasetService | None = DatasetService(settings)
+    except StoreError as exc:
+        service = None
+        app.state.store_problem = str(exc)
+        log.error("the store is unusable: %s", exc)
     app.state.service = service
-    if settings.build_on_start:
-        service.start_builds()
-    log.info("store %s: %d datasets", settings.store_path.name, len(service.store.dataset_ids()))
+    if service is not None:
+        if settings.build_on_start:
+            service.start_builds()
+        log.info("store %s: %d datasets", settings.store_path.name, len(service.store.dataset_ids()))
     try:
         yield
     finally:
-        service.store.close()
+        if service is not None:
+            service.close()

@@ -1,41 +1,46 @@
 """The datasets a running service knows: stored ones, configured sources, uploads, and their builds.
 
-Builds run in background threads (the service answers meanwhile; a dataset that is being rebuilt keeps
-serving its previous version). Their progress lives in the store's ``builds`` table, so every worker
-process sees it. A file lock next to the store makes sure only one process builds at a time; the others
-wait and then find the dataset current.
+Builds run in processes of their own, a bounded number at a time (:mod:`app.builds`); the service answers
+meanwhile, and a dataset being rebuilt keeps serving its previous version. A build's progress lives in the
+store's ``builds`` table, so every worker process sees it. An upload's id is reserved in that table in one
+transaction (:meth:`CCSStore.reserve`), so two requests, or two server processes, never get the same id.
 """
 
 from __future__ import annotations
 
-import fcntl
+import ctypes
 import json
 import logging
-import threading
-import time
+import os
 import uuid
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from app.errors import DatasetExists, MalformedUpload, public_message
+from app.builds import BuildRunner
+from app.errors import BuildQueueFull, DatasetExists, MalformedUpload, log_safe
 from app.settings import Settings
-from engine.errors import CCSMError, StoreNotReady, UnknownLayer
-from engine.serve.datasets import SourceSpec, build_and_save, build_dataset, slugify, source_hash
+from engine.errors import StoreError, StoreNotReady, StoreUnwritable, UnknownLayer
+from engine.serve.build_job import BuildJob
+from engine.serve.datasets import SourceSpec, build_lock, slugify, source_hash
 from engine.serve.renderer import Renderer, TileOptions
-from engine.store.sqlite import CCSStore, DatasetInfo
+from engine.store.sqlite import CCSStore, DatasetInfo, unwritable_reason
 from engine.tiles.grid import mercator_to_lonlat
 from engine.tiles.scale import zoom_for_scale
+
+__all__ = ["SAMPLE_ID", "SAMPLE_NAME", "DatasetService", "build_lock", "specs_from_settings"]
 
 log = logging.getLogger("ccsm.service")
 
 #: Dataset id of the bundled sample.
 SAMPLE_ID = "sample"
 SAMPLE_NAME = "Jacksboro, Tennessee: 20 m contours (USGS DEM, bundled sample)"
+#: Upload files are written under this prefix until their dataset id is reserved.
+INCOMING_PREFIX = ".incoming-"
+#: Bad features listed in the answer to an upload (all of them are in GET /datasets/{id} once built).
+BAD_FEATURES_SHOWN = 20
 
 
 def specs_from_settings(settings: Settings) -> list[SourceSpec]:
@@ -66,36 +71,79 @@ def specs_from_settings(settings: Settings) -> list[SourceSpec]:
     return []
 
 
-@contextmanager
-def build_lock(store_path: Path) -> Iterator[None]:
-    """An exclusive lock shared by every process using the store (held while one builds)."""
-    lock_path = store_path.with_name(store_path.name + ".build-lock")
-    lock_path.parent.mkdir(parents=True, exist_ok=True)
-    with open(lock_path, "a+") as fh:
-        fcntl.flock(fh, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(fh, fcntl.LOCK_UN)
+def open_checked_store(path: Path) -> CCSStore:
+    """Open the store, check it (``PRAGMA quick_check``) and checkpoint its WAL.
+
+    Raises
+    ------
+    StoreError
+        The file is damaged or not a ccsm store; the message says what to do.
+    """
+    advice = (
+        f"stop the service and move {path} (and its -wal/-shm files) aside; a new store is created at the next "
+        "start and configured sources are rebuilt (uploads must be uploaded again)"
+    )
+    try:
+        store = CCSStore(path)
+        problem = store.quick_check()
+    except StoreError as exc:
+        if _read_only(path.parent):  # not damaged: moving it aside would lose it
+            raise StoreUnwritable(
+                f"store {path.name} is on a read-only file system; make {path.parent} writable and restart"
+            ) from exc
+        raise StoreError(f"{exc}; {advice}") from exc
+    if problem != "ok":
+        store.close()
+        raise StoreError(f"store {path.name} is damaged ({problem}); {advice}")
+    store.checkpoint()
+    return store
 
 
-@dataclass
-class Upload:
-    """A validated upload waiting to be built."""
+@dataclass(frozen=True)
+class UploadParams:
+    """How an upload is read and built (part of its content hash)."""
 
-    dataset: str
-    name: str
-    path: Path
-    digest: str
-    params: dict[str, Any]
+    elevation_field: str | None
+    interval: float | None
+    source_scale: float
+    target_scale: float
+
+    def as_dict(self) -> dict[str, Any]:
+        """The parameters as stored with the dataset."""
+        return {
+            "elevation_field": self.elevation_field,
+            "interval": self.interval,
+            "source_scale": self.source_scale,
+            "target_scale": self.target_scale,
+        }
+
+
+def check_upload_document(body: bytes) -> None:
+    """Refuse a body that is not a GeoJSON FeatureCollection (or Feature) object (MalformedUpload)."""
+    try:
+        doc = json.loads(body)
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise MalformedUpload(f"the body is not valid JSON ({exc})") from None
+    except RecursionError:
+        raise MalformedUpload("the body's JSON is nested too deeply to be GeoJSON") from None
+    if not isinstance(doc, dict) or doc.get("type") not in ("FeatureCollection", "Feature"):
+        raise MalformedUpload("the body must be a GeoJSON FeatureCollection (or Feature) of contour lines")
+    if doc["type"] == "FeatureCollection" and not isinstance(doc.get("features"), list):
+        raise MalformedUpload("a FeatureCollection needs a 'features' array")
 
 
 class DatasetService:
-    """Owns the store, the renderer and the background builds of one worker process."""
+    """Owns the store, the renderer and the builds of one worker process.
+
+    Raises
+    ------
+    StoreError
+        The store cannot be opened or is damaged (see :func:`open_checked_store`).
+    """
 
     def __init__(self, settings: Settings) -> None:
         self.settings = settings
-        self.store = CCSStore(settings.store_path)
+        self.store = open_checked_store(settings.store_path)
         self.renderer = Renderer(
             self.store,
             TileOptions(
@@ -108,23 +156,27 @@ class DatasetService:
             baseline_cache_entries=settings.baseline_cache_entries,
         )
         self.specs = specs_from_settings(settings)
-        self._threads: list[threading.Thread] = []
-        self._lock = threading.Lock()
-        self._local_failures: dict[str, str] = {}
         self.upload_dir = settings.store_path.parent / "uploads"
+        self.builds = BuildRunner(settings.max_builds, settings.build_queue, self._build_ended)
+        self.remove_stale_uploads()
 
     # -- builds ------------------------------------------------------------------------------------------
     def start_builds(self) -> None:
-        """Build every configured source that is missing or changed, in one background thread."""
-        pending = [s for s in self.specs if not self._is_current(s)]
-        if not pending:
-            return
-        for spec in pending:
-            if spec.path.exists():
-                self.store.set_build_status(spec.dataset, "building", 0, 0)
-        thread = threading.Thread(target=self._build_sources, args=(pending,), name="ccsm-build", daemon=True)
-        self._threads.append(thread)
-        thread.start()
+        """Queue a build of every configured source that is missing or changed."""
+        for spec in self.specs:
+            if self._is_current(spec) or not spec.path.exists():
+                continue
+            self.store.set_build_status(spec.dataset, "building", 0, 0)
+            job = BuildJob(
+                kind="source",
+                store_path=str(self.settings.store_path),
+                dataset=spec.dataset,
+                source_path=str(spec.path),
+                name=spec.name,
+                params=spec.params(),
+                workers=self.settings.build_workers,
+            )
+            self.builds.submit(job, limit_queue=False)
 
     def _is_current(self, spec: SourceSpec) -> bool:
         try:
@@ -132,143 +184,140 @@ class DatasetService:
         except OSError:
             return False
 
-    def _build_sources(self, specs: list[SourceSpec]) -> None:
-        with build_lock(self.settings.store_path):
-            for spec in specs:
-                self._build_one(spec)
-
-    def _progress(self, dataset: str) -> Any:
-        last = [0.0]
-
-        def report(done: int, total: int) -> None:
-            now = time.monotonic()
-            if done in (0, total) or now - last[0] > 0.25:
-                last[0] = now
-                self.store.set_build_status(dataset, "building", done, total)
-
-        return report
-
-    def _build_one(self, spec: SourceSpec) -> None:
-        try:
-            self.store.set_build_status(spec.dataset, "building", 0, 0)
-            info, rebuilt = build_dataset(
-                self.store, spec, workers=self.settings.build_workers, progress=self._progress(spec.dataset)
-            )
-            self.store.clear_build_status(spec.dataset)
-            self.renderer.forget(spec.dataset)
-            log.info(
-                "dataset %s %s (%d contours)",
-                spec.dataset,
-                "built" if rebuilt else "current",
-                info.n_contours,
-            )
-        except Exception as exc:  # a failed build is reported on the dataset, the service keeps running
-            message = public_message(str(exc)) if isinstance(exc, CCSMError) else "build failed (see the log)"
-            log.error("building %s failed", spec.dataset, exc_info=exc)
-            self.store.set_build_status(spec.dataset, "failed", 0, 0, message)
+    def _build_ended(self, job: BuildJob, returncode: int) -> None:
+        """A build process ended: one killed or crashed leaves a reason (unless its dataset was deleted)."""
+        if returncode != 0:
+            why = f"the build process ended with status {returncode} (see the service log)"
+            if self.store.fail_build(job.dataset, why):
+                log.error("building %s: %s", log_safe(job.dataset), why)
+        else:
+            self.renderer.forget(job.dataset)
+        if job.kind == "upload":
+            Path(job.source_path).unlink(missing_ok=True)
 
     def wait_for_builds(self, timeout: float | None = None) -> None:
-        """Block until the background builds started so far are done (tests, CLI)."""
-        for t in list(self._threads):
-            t.join(timeout)
+        """Block until the builds started or queued so far are done (tests, CLI)."""
+        self.builds.wait_idle(timeout)
+
+    def close(self) -> None:
+        """End every build (the server is stopping) and close the store."""
+        self.builds.shutdown()
+        self.store.close()
+
+    def remove_stale_uploads(self) -> None:
+        """Remove upload files no live build needs (left by a killed server or build)."""
+        if not self.upload_dir.is_dir():
+            return
+        statuses = self.store.build_statuses()
+        live = {d for d, s in statuses.items() if s.state == "building"}
+        for path in self.upload_dir.glob("*.geojson"):
+            if path.name.startswith(INCOMING_PREFIX):
+                pid = path.name[len(INCOMING_PREFIX) :].split("-", 1)[0]
+                if pid.isdigit() and _pid_alive(int(pid)):
+                    continue
+            elif path.name.rsplit("-", 1)[0] in live:
+                continue
+            path.unlink(missing_ok=True)
+            log.info("removed the stale upload file %s", path.name)
 
     # -- uploads -----------------------------------------------------------------------------------------
-    def validate_upload(
-        self,
-        body: bytes,
-        *,
-        dataset: str | None,
-        name: str | None,
-        elevation_field: str | None,
-        interval: float | None,
-        source_scale: float,
-        target_scale: float,
-    ) -> tuple[Upload, Any]:
-        """Check an uploaded GeoJSON and read its contours (raises MalformedUpload, SourceError, ...)."""
+    def upload(self, body: bytes, *, dataset: str | None, name: str | None, params: UploadParams) -> dict[str, Any]:
+        """Check, store and queue an upload; the JSON answer of POST /datasets.
+
+        Raises
+        ------
+        MalformedUpload, SourceError, InvalidParameter
+            The body or the parameters are bad (nothing is kept).
+        DatasetExists
+            ``dataset`` is taken (stored, building or failed).
+        BuildQueueFull
+            Too many builds wait already.
+        StoreUnwritable
+            The disk is full or read-only.
+        """
+        try:
+            return self._upload(body, dataset=dataset, name=name, params=params)
+        finally:
+            release_freed_memory()
+
+    def _upload(self, body: bytes, *, dataset: str | None, name: str | None, params: UploadParams) -> dict[str, Any]:
         from engine.io.source import read_source
         from engine.params import BuildParams
 
-        BuildParams(source_scale=source_scale, target_scale=target_scale)  # validates the scales
-        try:
-            doc = json.loads(body)
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise MalformedUpload(f"the body is not valid JSON ({exc})") from None
-        if not isinstance(doc, dict) or doc.get("type") not in ("FeatureCollection", "Feature"):
-            raise MalformedUpload(
-                "the body must be a GeoJSON FeatureCollection (or Feature) of contour lines"
-            )
-        if doc["type"] == "FeatureCollection" and not isinstance(doc.get("features"), list):
-            raise MalformedUpload("a FeatureCollection needs a 'features' array")
-        params = {
-            "elevation_field": elevation_field,
-            "interval": interval,
-            "source_scale": source_scale,
-            "target_scale": target_scale,
-        }
-        digest = source_hash(None, params, data=body)
-        if not dataset:
-            ident = self._free_id(slugify(name) if name else f"upload-{digest[:10]}")
-        elif dataset != slugify(dataset):
-            raise MalformedUpload(f"dataset id {dataset!r} may contain only a-z, 0-9, '_' and '-'")
-        elif self._taken(dataset):
+        BuildParams(source_scale=params.source_scale, target_scale=params.target_scale)  # validates the scales
+        check_upload_document(body)
+        if dataset and self._taken(dataset):  # early answer; the reservation below decides
             raise DatasetExists(f"dataset {dataset!r} exists already; DELETE it first or choose another id")
-        else:
-            ident = dataset
-        self.upload_dir.mkdir(parents=True, exist_ok=True)
-        path = self.upload_dir / f"{ident}-{uuid.uuid4().hex[:8]}.geojson"
-        path.write_bytes(body)
+        incoming = self._write_incoming(body)
         try:
-            contour_set = read_source(path, elevation_field=elevation_field, interval=interval)
+            contour_set = read_source(
+                incoming, elevation_field=params.elevation_field, interval=params.interval
+            )
+            ident = self._reserve(dataset, name, len(contour_set.contours), body, params)
+            path = self.upload_dir / f"{ident}-{uuid.uuid4().hex[:8]}.geojson"
+            incoming.rename(path)
         except BaseException:
+            incoming.unlink(missing_ok=True)
+            raise
+        job = BuildJob(
+            kind="upload",
+            store_path=str(self.settings.store_path),
+            dataset=ident,
+            source_path=str(path),
+            name=name or ident,
+            params=params.as_dict(),
+            digest=source_hash(None, params.as_dict(), data=body),
+            workers=1,
+        )
+        try:
+            self.builds.submit(job)
+        except BuildQueueFull:
+            self.store.delete_any(ident)
             path.unlink(missing_ok=True)
             raise
-        return Upload(ident, name or ident, path, digest, params), contour_set
+        bad = [
+            {"id": b.id, "reason": b.reason} for b in contour_set.bad_features[:BAD_FEATURES_SHOWN]
+        ]
+        return {
+            "id": ident,
+            "name": job.name,
+            "state": "building",
+            "contours": len(contour_set.contours),
+            "bad_features": len(contour_set.bad_features),
+            "bad_feature_list": bad,
+            "href": f"/datasets/{ident}",
+        }
+
+    def _write_incoming(self, body: bytes) -> Path:
+        """The body in a file of the upload folder; StoreUnwritable (and no partial file) if it cannot be."""
+        path = self.upload_dir / f"{INCOMING_PREFIX}{os.getpid()}-{uuid.uuid4().hex[:8]}.geojson"
+        try:
+            self.upload_dir.mkdir(parents=True, exist_ok=True)
+            path.write_bytes(body)
+        except OSError as exc:
+            _remove(path)
+            reason = unwritable_reason(exc)
+            if reason is None:
+                raise
+            raise StoreUnwritable(f"the upload cannot be saved: {reason}") from exc
+        return path
+
+    def _reserve(
+        self, dataset: str | None, name: str | None, total: int, body: bytes, params: UploadParams
+    ) -> str:
+        if dataset:
+            if not self.store.reserve(dataset, total):
+                raise DatasetExists(
+                    f"dataset {dataset!r} exists already; DELETE it first or choose another id"
+                )
+            return dataset
+        # An id made from the name: uploading a file of the same name again makes name-2, name-3, ...
+        digest = source_hash(None, params.as_dict(), data=body)
+        base = (slugify(name) if name else f"upload-{digest[:10]}")[:60] or "upload"
+        return self.store.reserve_free(base, total)
 
     def _taken(self, ident: str) -> bool:
-        return self.store.data_version(ident) is not None or self._building(ident)
-
-    def _free_id(self, base: str) -> str:
-        """``base``, or ``base-2``, ``base-3``, ... for an id made from a name: uploading a file of the same
-        name again makes a new dataset instead of failing (an explicit ``id`` still gets 409)."""
-        base = base[:60] or "upload"
-        ident, n = base, 2
-        while self._taken(ident):
-            ident, n = f"{base}-{n}", n + 1
-        return ident
-
-    def start_upload_build(self, upload: Upload, contour_set: Any) -> None:
-        """Build a validated upload in the background (one process: the server keeps the other cores)."""
-        self.store.set_build_status(upload.dataset, "building", 0, len(contour_set.contours))
-        thread = threading.Thread(
-            target=self._build_upload,
-            args=(upload, contour_set),
-            name=f"ccsm-upload-{upload.dataset}",
-            daemon=True,
-        )
-        self._threads.append(thread)
-        thread.start()
-
-    def _build_upload(self, upload: Upload, contour_set: Any) -> None:
-        try:
-            build_and_save(
-                self.store,
-                upload.dataset,
-                contour_set,
-                name=upload.name,
-                source="upload",
-                digest=upload.digest,
-                params=upload.params,
-                workers=1,
-                progress=self._progress(upload.dataset),
-                still_wanted=lambda: self._building(upload.dataset) is not None,  # not deleted meanwhile
-            )
-            self.store.clear_build_status(upload.dataset)
-        except Exception as exc:
-            message = public_message(str(exc)) if isinstance(exc, CCSMError) else "build failed (see the log)"
-            log.error("building upload %s failed", upload.dataset, exc_info=exc)
-            self.store.set_build_status(upload.dataset, "failed", 0, 0, message)
-        finally:
-            upload.path.unlink(missing_ok=True)
+        return self.store.data_version(ident) is not None or self._building(ident) is not None
 
     # -- queries -----------------------------------------------------------------------------------------
     def _building(self, dataset: str) -> Any:
@@ -306,10 +355,11 @@ class DatasetService:
         return ids[0]
 
     def summaries(self) -> list[dict[str, Any]]:
-        """id, name, state of every dataset (stored, configured, uploaded or building).
+        """id, name, state of every dataset (stored, uploaded or building).
 
         A stored dataset is ``ready`` (also while a newer version of it builds: it keeps serving); one not
-        stored yet is ``building`` or, when its build failed, ``failed``.
+        stored yet is ``building`` or, when its build failed, ``failed``. A configured source that was
+        deleted is not listed (it is built again at the next start).
         """
         statuses = self.store.build_statuses()
         names = {s.dataset: s.name for s in self.specs}
@@ -317,10 +367,9 @@ class DatasetService:
         for ident in self.store.dataset_ids():
             info = self.renderer.info(ident)[0]
             out[ident] = {"id": ident, "name": info.name, "state": "ready", "data_version": info.data_version}
-        pending = {s.dataset for s in self.specs} | set(statuses)
-        for ident in sorted(pending - set(out)):
-            st = statuses.get(ident)
-            state = "failed" if st is not None and st.state == "failed" else "building"
+        for ident in sorted(set(statuses) - set(out)):
+            st = statuses[ident]
+            state = "failed" if st.state == "failed" else "building"
             out[ident] = {"id": ident, "name": names.get(ident, ident), "state": state, "data_version": None}
         return sorted(out.values(), key=lambda d: d["id"])
 
@@ -350,11 +399,76 @@ class DatasetService:
         return out
 
     def delete(self, dataset: str) -> None:
-        """Remove a dataset (raises UnknownLayer if there is none)."""
-        existed = self.store.delete(dataset)
+        """Remove a dataset, ready, building (its build is stopped) or failed (raises UnknownLayer if none)."""
+        existed = self.store.delete_any(dataset)  # first: a build still running can no longer write it
+        self.builds.cancel(dataset)
         self.renderer.forget(dataset)
         if not existed:
             raise UnknownLayer(f"unknown dataset {dataset!r}")
+
+    def readiness(self) -> list[str]:
+        """Why the service is not ready to serve and take uploads (empty when it is)."""
+        problems = []
+        try:
+            self.store.probe_write()
+        except StoreError as exc:
+            problems.append(str(exc))
+        if _read_only(self.upload_dir if self.upload_dir.is_dir() else self.upload_dir.parent):
+            problems.append(f"the upload folder {self.upload_dir.name}/ is on a read-only file system")
+        free = _free_bytes(self.settings.store_path.parent)
+        if free is not None and free < self.settings.max_upload_bytes:
+            problems.append(
+                f"only {free >> 10} KiB free beside the store, less than one upload "
+                f"({self.settings.max_upload_bytes >> 10} KiB, CCSM_MAX_UPLOAD_MB)"
+            )
+        for ident, st in sorted(self.store.build_statuses().items()):
+            if st.state == "failed":
+                problems.append(f"dataset {ident!r} failed to build: {st.error}")
+            elif self.store.data_version(ident) is None:
+                problems.append(f"dataset {ident!r} is being built ({st.done}/{st.total} contours)")
+        return problems
+
+
+def release_freed_memory() -> None:
+    """Give the heap freed by a large upload back to the system (glibc keeps it otherwise, and the server's
+    RSS would stay at its peak); a no-op elsewhere."""
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+
+
+def _remove(path: Path) -> None:
+    """Remove a file if it is there and can be (a read-only file system cannot hold a partial one anyway)."""
+    try:
+        path.unlink(missing_ok=True)
+    except OSError as exc:
+        log.warning("cannot remove %s: %s", path.name, exc)
+
+
+def _read_only(folder: Path) -> bool:
+    try:
+        return bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
+    except OSError:
+        return False
+
+
+def _free_bytes(folder: Path) -> int | None:
+    try:
+        usage = os.statvfs(folder)
+    except OSError:
+        return None
+    return usage.f_bavail * usage.f_frsize
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def lonlat_bounds(info: DatasetInfo) -> list[float]:

@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 #: The project folder (where web/ lives), so relative paths do not depend on the working directory.
@@ -44,6 +44,12 @@ class Settings(BaseSettings):
     build_workers: int | None = Field(None, ge=1, description="Processes per build; unset = one per core.")
     build_on_start: bool = Field(
         True, description="Build missing or changed sources at startup, in the background."
+    )
+    max_builds: int = Field(
+        1, ge=1, le=64, description="Builds (uploads, sources) running at once per server process."
+    )
+    build_queue: int = Field(
+        4, ge=0, le=1000, description="Builds waiting for a free slot; one more upload is refused with 429."
     )
 
     # -- tiles --------------------------------------------------------------------------------------------
@@ -93,6 +99,11 @@ class Settings(BaseSettings):
         default_factory=lambda: ["*"], description="Origins allowed by CORS, comma-separated ('*' = any)."
     )
     max_upload_mb: float = Field(20.0, gt=0, description="Largest POST /datasets body, MB.")
+    admin_token: SecretStr | None = Field(
+        None,
+        description="Bearer token that writes (POST/DELETE /datasets) need; unset = writes only from "
+        "loopback clients addressing the server as localhost.",
+    )
     web_dir: Path = Field(
         Path("web"),
         description="Directory of the web map (index.html), served at /; a relative path is taken from the "

@@ -37,3 +37,11 @@ class StoreNotReady(CCSMError):
 
 class StoreError(CCSMError):
     """The store file is missing, corrupt or of another version."""
+
+
+class StoreUnwritable(StoreError):
+    """The store (or the folder of uploads beside it) cannot be written: a full disk, a read-only file system."""
+
+
+class BuildCancelled(CCSMError):
+    """A build's dataset was deleted while it built: nothing is written."""

@@ -76,14 +76,27 @@ def serve(
     from app.settings import Settings
 
     try:
-        Settings()
+        settings = Settings()
     except ValidationError as exc:
         typer.echo(f"error: invalid settings: {exc}", err=True)
         raise typer.Exit(2) from None
+    _check_store_or_exit(settings.store_path)
     # The app is created from the environment in each worker (app.main:app), so 1 or N workers behave alike.
     uvicorn.run(
         "app.main:app", host=host, port=port, workers=workers, log_level=log_level, proxy_headers=True
     )
+
+
+def _check_store_or_exit(store_path: Path) -> None:
+    """Refuse to start on a damaged store (exit status 2 and what to do), instead of a traceback loop."""
+    from app.service import open_checked_store
+    from engine.errors import StoreError
+
+    try:
+        open_checked_store(store_path).close()
+    except StoreError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from None
 
 
 @app.command()

@@ -10,7 +10,8 @@ from fastapi.responses import JSONResponse
 
 from app.dependencies import get_service, get_settings
 from app.errors import UploadTooLarge
-from app.service import DatasetService
+from app.security import require_json_body, require_writer
+from app.service import DatasetService, UploadParams
 from app.settings import Settings
 
 router = APIRouter(tags=["datasets"])
@@ -51,6 +52,7 @@ async def read_limited(request: Request, limit: int) -> bytes:
 @router.post(
     "/datasets",
     status_code=202,
+    dependencies=[Depends(require_writer), Depends(require_json_body)],
     openapi_extra={
         "requestBody": {
             "required": True,
@@ -63,9 +65,14 @@ async def read_limited(request: Request, limit: int) -> bytes:
     },
     responses={
         202: {"description": "Accepted; the dataset builds in the background (poll GET /datasets/{id})."},
-        400: {"description": "Malformed GeoJSON or no usable contour."},
-        409: {"description": "The dataset id exists."},
+        400: {"description": "Malformed GeoJSON or no usable contour (the bad features are named)."},
+        401: {"description": "CCSM_ADMIN_TOKEN is set and the bearer token is missing or wrong."},
+        403: {"description": "No token is set and the client is not local (writes are loopback-only)."},
+        409: {"description": "The dataset id exists (ready, building or failed)."},
         413: {"description": "Larger than CCSM_MAX_UPLOAD_MB."},
+        415: {"description": "The body is not application/geo+json or application/json."},
+        429: {"description": "Too many builds run and wait (CCSM_MAX_BUILDS, CCSM_BUILD_QUEUE); see Retry-After."},
+        507: {"description": "The store or the upload folder cannot be written (full disk, read-only)."},
     },
 )
 async def upload_dataset(
@@ -95,34 +102,33 @@ async def upload_dataset(
         float | None, Query(description="Scale denominator of t = 1.", gt=0, le=1e10, allow_inf_nan=False)
     ] = None,
 ) -> JSONResponse:
-    """Upload GeoJSON contours; answered 202 while the dataset builds in the background."""
+    """Upload GeoJSON contours (the document itself is the body); answered 202 while the dataset builds in
+    a build process of its own."""
     body = await read_limited(request, settings.max_upload_bytes)
-    upload, contour_set = await run_in_threadpool(
-        service.validate_upload,
-        body,
-        dataset=id,
-        name=name,
+    params = UploadParams(
         elevation_field=elevation_field,
         interval=interval,
         source_scale=source_scale or settings.source_scale,
         target_scale=target_scale or settings.target_scale,
     )
-    service.start_upload_build(upload, contour_set)
-    out: dict[str, Any] = {
-        "id": upload.dataset,
-        "name": upload.name,
-        "state": "building",
-        "contours": len(contour_set.contours),
-        "bad_features": len(contour_set.bad_features),
-        "href": f"/datasets/{upload.dataset}",
-    }
+    out: dict[str, Any] = await run_in_threadpool(service.upload, body, dataset=id, name=name, params=params)
     return JSONResponse(out, status_code=202, headers={"Location": out["href"], **NO_STORE})
 
 
-@router.delete("/datasets/{dataset}", status_code=204, responses={404: {"description": "Unknown dataset."}})
+@router.delete(
+    "/datasets/{dataset}",
+    status_code=204,
+    dependencies=[Depends(require_writer)],
+    responses={
+        401: {"description": "CCSM_ADMIN_TOKEN is set and the bearer token is missing or wrong."},
+        403: {"description": "No token is set and the client is not local."},
+        404: {"description": "Unknown dataset."},
+    },
+)
 def delete_dataset(
     dataset: DatasetPath, service: Annotated[DatasetService, Depends(get_service)]
 ) -> Response:
-    """Delete a dataset from the store (a configured source is rebuilt at the next start)."""
+    """Delete a dataset, ready, building (its build stops) or failed; a configured source is rebuilt at the
+    next start."""
     service.delete(dataset)
     return Response(status_code=204)

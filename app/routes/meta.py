@@ -20,6 +20,20 @@ async def healthz() -> JSONResponse:
     return JSONResponse({"status": "ok"}, headers={"Cache-Control": "no-store"})
 
 
+@router.get(
+    "/readyz",
+    responses={503: {"description": "Not ready: the reasons are listed (store, disk, datasets)."}},
+)
+def readyz(request: Request) -> JSONResponse:
+    """Readiness: 200 when the store can be written and every dataset is ready; else 503 with the reasons
+    (a damaged or unwritable store, a nearly full disk, datasets building or failed)."""
+    service: DatasetService | None = request.app.state.service
+    problems = [request.app.state.store_problem] if service is None else service.readiness()
+    status = 503 if problems else 200
+    body = {"status": "not ready" if problems else "ready", "problems": problems}
+    return JSONResponse(body, status_code=status, headers={"Cache-Control": "no-store"})
+
+
 @router.get("/", include_in_schema=False)
 def index(request: Request, settings: Annotated[Settings, Depends(get_settings)]) -> Response:
     """The web map (web/index.html) when it exists, else a short page of links."""

@@ -44,6 +44,12 @@ ELEVATION_FIELDS: tuple[str, ...] = ("ele", "elev", "elevation", "z", "height", 
 VECTOR_SUFFIXES: tuple[str, ...] = (".geojson", ".json", ".gpkg", ".shp")
 
 #: shapely geometry type ids (``shapely.get_type_id``) that are lines.
+#: Largest latitude Web Mercator (EPSG:3857) covers: the edge of the square world; contours beyond cannot be
+#: tiled, so they are reported as bad features at read time rather than accepted and then unservable.
+WEB_MERCATOR_MAX_LAT = 85.0511287798066
+#: Largest |elevation| accepted (metres or feet alike): far beyond any terrain, yet small enough that the
+#: differences between elevations (the contour interval) stay finite.
+MAX_ABS_ELEVATION = 1e6
 _LINE_TYPES = (1, 2)  # LineString, LinearRing
 _MULTI_LINE = 5  # MultiLineString
 _TYPE_NAMES = {
@@ -220,6 +226,10 @@ def _parse_elevations(values: NDArray[Any], name: str) -> tuple[NDArray[np.float
                 if np.isnan(v)
                 else f"elevation {v} in field {name!r} is not finite"
             )
+        magnitude = np.abs(np.nan_to_num(elevations, nan=0.0, posinf=0.0, neginf=0.0))
+        for j in np.flatnonzero(magnitude > MAX_ABS_ELEVATION).tolist():
+            reasons[j] = _elevation_too_large(elevations[j], name)
+            elevations[j] = np.nan
         return elevations, reasons
     # Text (or mixed) fields: GDAL makes a field a string as soon as one feature holds text.
     elevations = np.full(n, np.nan, dtype=np.float64)
@@ -236,9 +246,24 @@ def _parse_elevations(values: NDArray[Any], name: str) -> tuple[NDArray[np.float
             reasons[i] = f"no elevation in field {name!r}"
         elif not math.isfinite(number):
             reasons[i] = f"elevation {value!r} in field {name!r} is not finite"
+        elif abs(number) > MAX_ABS_ELEVATION:
+            reasons[i] = _elevation_too_large(number, name)
         else:
             elevations[i] = number
     return elevations, reasons
+
+
+def _elevation_too_large(value: float, name: str) -> str:
+    return f"elevation {value:g} in field {name!r} is beyond ±{MAX_ABS_ELEVATION:g}"
+
+
+def _geometries(wkb: NDArray[Any]) -> NDArray[Any]:
+    """Shapely geometries of WKB blobs; one GEOS refuses (a LineString of one point) becomes None."""
+    with np.errstate(invalid="ignore"):  # NaN coordinates are reported per feature below, not warned about
+        try:
+            return np.asarray(shapely.from_wkb(wkb), dtype=object)
+        except shapely.errors.GEOSException:
+            return np.asarray(shapely.from_wkb(wkb, on_invalid="ignore"), dtype=object)
 
 
 def _explode_lines(
@@ -249,8 +274,7 @@ def _explode_lines(
     where: str,
 ) -> LineParts:
     """Split features into line parts (one per LineString or MultiLineString part), rejecting the rest."""
-    with np.errstate(invalid="ignore"):  # NaN coordinates are reported per feature below, not warned about
-        geoms = shapely.from_wkb(wkb)
+    geoms = _geometries(wkb)
     type_ids = shapely.get_type_id(geoms)  # -1 for a missing geometry
     bad: list[BadFeature] = []
     keep_geoms = []
@@ -259,7 +283,9 @@ def _explode_lines(
     for i, (geom, type_id) in enumerate(zip(geoms, type_ids, strict=True)):
         fid = feature_ids[i]
         reason: str | None = None
-        if geom is None or type_id < 0:
+        if geom is None and wkb[i] is not None:
+            reason = "invalid geometry (a LineString needs at least 2 points)"
+        elif geom is None or type_id < 0:
             reason = "no geometry"
         elif type_id not in _LINE_TYPES and type_id != _MULTI_LINE:
             reason = f"{_TYPE_NAMES.get(int(type_id), 'geometry')} is not a line"
@@ -363,6 +389,9 @@ def assemble_contours(
         reasons.setdefault(int(k), f"coordinates out of range for {crs_label} ({x:.8g}, {y:.8g})")
     ok &= _all_per_part(valid_vertex | ~candidate, part_of, n_parts)
 
+    # 2b. Beyond Web Mercator's latitudes: valid coordinates, yet no tile can show them.
+    ok &= ~_beyond_web_mercator(parts, part_of, ok, lonlat, reasons)
+
     if not ok.any():
         _raise_nothing_usable(where, bad + _bad_from_reasons(parts, reasons, where))
 
@@ -427,6 +456,24 @@ def assemble_contours(
         name=name,
         interval=interval,
     )
+
+
+def _beyond_web_mercator(
+    parts: LineParts,
+    part_of: NDArray[np.int64],
+    ok: NDArray[np.bool_],
+    lonlat: NDArray[np.float64],
+    reasons: dict[int, str],
+) -> NDArray[np.bool_]:
+    """(n_parts,) True for the usable parts with a vertex beyond ±WEB_MERCATOR_MAX_LAT (reason recorded)."""
+    polar = ok[part_of] & (np.abs(lonlat[:, 1]) > WEB_MERCATOR_MAX_LAT)
+    for k in np.unique(part_of[polar]).tolist():
+        lo, hi = int(parts.offsets[k]), int(parts.offsets[k + 1])
+        lat = float(lonlat[lo + int(np.argmax(np.abs(lonlat[lo:hi, 1])))][1])
+        reasons.setdefault(
+            int(k), f"latitude {lat:.6g} is outside Web Mercator's range (±{WEB_MERCATOR_MAX_LAT:.4f}°)"
+        )
+    return np.isin(np.arange(len(ok)), part_of[polar])
 
 
 def _bad_from_reasons(parts: LineParts, reasons: dict[int, str], where: str) -> list[BadFeature]:
@@ -552,7 +599,8 @@ def infer_interval(elevations: NDArray[np.float64]) -> float | None:
     if len(levels) < 2:
         return None
     steps = np.round(np.diff(levels), 6)
-    return float(Counter(steps.tolist()).most_common(1)[0][0])
+    step = float(Counter(steps.tolist()).most_common(1)[0][0])
+    return step if math.isfinite(step) else None
 
 
 def write_geojson(

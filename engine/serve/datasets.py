@@ -6,11 +6,14 @@ unchanged source is never rebuilt and a changed one always is.
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import json
 import os
 import time
-from collections.abc import Callable, Sequence
+import unicodedata
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -77,16 +80,36 @@ class SourceSpec:
         }
 
 
+_ID_CHARS = frozenset("abcdefghijklmnopqrstuvwxyz0123456789_-")
+
+
 def slugify(text: str) -> str:
-    """A dataset id from a name: lowercase letters, digits, ``_`` and ``-``.
+    """A dataset id from a name: ASCII lowercase letters, digits, ``_`` and ``-`` only (accents dropped,
+    other scripts replaced), so an id is safe in a URL path and an HTTP header.
 
     >>> slugify("Jacksboro Contours 20m.geojson")
     'jacksboro-contours-20m-geojson'
+    >>> slugify("Hügel 山")
+    'hugel'
     """
-    out = "".join(c if c.isalnum() or c in "_-" else "-" for c in text.lower().strip())
+    folded = unicodedata.normalize("NFKD", text.lower().strip()).encode("ascii", "ignore").decode("ascii")
+    out = "".join(c if c in _ID_CHARS else "-" for c in folded)
     while "--" in out:
         out = out.replace("--", "-")
     return out.strip("-")[:64] or "dataset"
+
+
+@contextmanager
+def build_lock(store_path: Path) -> Iterator[None]:
+    """An exclusive lock shared by every process using the store (held while a configured source builds)."""
+    lock_path = store_path.with_name(store_path.name + ".build-lock")
+    lock_path.parent.mkdir(parents=True, exist_ok=True)
+    with open(lock_path, "a+") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
 
 
 def is_current(store: CCSStore, spec: SourceSpec) -> bool:
@@ -107,6 +130,7 @@ def build_and_save(
     workers: int | None = None,
     progress: Progress | None = None,
     still_wanted: Callable[[], bool] | None = None,
+    only_if_building: bool = False,
 ) -> DatasetInfo | None:
     """Build every contour of a read source and write the dataset in one transaction.
 
@@ -117,6 +141,9 @@ def build_and_save(
     still_wanted
         Asked once the build is done and before writing: False (the dataset was deleted meanwhile) skips the
         write and returns None.
+    only_if_building
+        Write only while the store still records this build (checked in the write transaction); raises
+        BuildCancelled when the dataset was deleted meanwhile.
 
     Raises
     ------
@@ -138,6 +165,7 @@ def build_and_save(
         digest=digest,
         params=params,
         build_seconds=time.perf_counter() - started,
+        only_if_building=only_if_building,
     )
 
 
@@ -152,12 +180,13 @@ def save_built(
     digest: str,
     params: dict[str, Any],
     build_seconds: float = 0.0,
+    only_if_building: bool = False,
 ) -> DatasetInfo:
     """Write a built set (``contours``: the input contours it was built from) as one dataset version."""
     meta = dataset_meta(
         built, name=name, source=source, source_hash=digest, params=params, build_seconds=build_seconds
     )
-    return store.save(dataset, meta, contour_rows(built, contours))
+    return store.save(dataset, meta, contour_rows(built, contours), only_if_building=only_if_building)
 
 
 def build_dataset(
@@ -167,6 +196,7 @@ def build_dataset(
     workers: int | None = None,
     progress: Progress | None = None,
     force: bool = False,
+    only_if_building: bool = False,
 ) -> tuple[DatasetInfo, bool]:
     """Read, build and store one source unless the store already holds it unchanged.
 
@@ -195,6 +225,7 @@ def build_dataset(
         params=spec.params(),
         workers=workers,
         progress=progress,
+        only_if_building=only_if_building,
     )
     assert info is not None  # no still_wanted callback: always written
     return info, True

@@ -13,6 +13,7 @@ and leave decoded; what they mean is the serving layer's business.
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
@@ -29,7 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from engine.errors import StoreError, UnknownLayer
+from engine.errors import BuildCancelled, StoreError, StoreUnwritable, UnknownLayer
 from engine.types import Coords
 
 #: Bumped whenever the layout of the file changes; a store of another format is refused.
@@ -269,6 +270,20 @@ def _contour_row(dataset: str, c: NewContour) -> tuple[Any, ...]:
     )
 
 
+#: SQLite's messages for a write the file system refuses (full disk, read-only mount or file, I/O error).
+_UNWRITABLE_MESSAGES = ("database or disk is full", "readonly database", "disk i/o error", "unable to open")
+
+
+def unwritable_reason(exc: BaseException) -> str | None:
+    """Why a write failed when the file system refused it (else None: a bug, not the disk)."""
+    text = str(exc).lower()
+    if isinstance(exc, sqlite3.OperationalError) and any(m in text for m in _UNWRITABLE_MESSAGES):
+        return str(exc)
+    if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EROFS, errno.EACCES, errno.EDQUOT, errno.EPERM):
+        return os.strerror(exc.errno or 0)
+    return None
+
+
 def _pid_alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -341,13 +356,47 @@ class CCSStore:
         """One write transaction (BEGIN IMMEDIATE ... COMMIT, ROLLBACK on any exception)."""
         con = self._con()
         cur = con.cursor()
-        cur.execute("BEGIN IMMEDIATE")
         try:
-            yield cur
-        except BaseException:
-            con.execute("ROLLBACK")
-            raise
-        con.execute("COMMIT")
+            cur.execute("BEGIN IMMEDIATE")
+            try:
+                yield cur
+            except BaseException:
+                if con.in_transaction:
+                    con.execute("ROLLBACK")
+                raise
+            con.execute("COMMIT")
+        except sqlite3.OperationalError as exc:
+            reason = unwritable_reason(exc)
+            if reason is None:
+                raise
+            if con.in_transaction:
+                con.execute("ROLLBACK")
+            self._shrink_wal()  # a full disk must not stay full of a rolled-back transaction's WAL
+            raise StoreUnwritable(f"store {self.path.name} cannot be written: {reason}") from exc
+
+    def _shrink_wal(self) -> None:
+        try:
+            self._con().execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        except sqlite3.DatabaseError:
+            pass  # best effort: the next start checkpoints again
+
+    def checkpoint(self) -> None:
+        """Copy the WAL into the file and truncate it (at start: a WAL left by a crash or a full disk)."""
+        if not self.readonly:
+            self._shrink_wal()
+
+    def quick_check(self) -> str:
+        """``ok``, or what SQLite's ``PRAGMA quick_check`` found wrong with the file (first lines)."""
+        try:
+            rows = [str(r[0]) for r in self._con().execute("PRAGMA quick_check(5)")]
+        except sqlite3.DatabaseError as exc:
+            return str(exc)
+        return "ok" if rows == ["ok"] else "; ".join(rows)
+
+    def probe_write(self) -> None:
+        """A real (tiny) write transaction: raises StoreUnwritable when the store cannot be written now."""
+        with self._write() as cur:
+            cur.execute("UPDATE store_meta SET value=value WHERE key='format'")
 
     def close(self) -> None:
         """Close this thread's connection."""
@@ -415,11 +464,15 @@ class CCSStore:
         meta: NewDataset,
         contours: Sequence[NewContour],
         progress: Callable[[int, int], None] | None = None,
+        *,
+        only_if_building: bool = False,
     ) -> DatasetInfo:
         """Write a dataset, replacing any previous version, in one transaction.
 
         Inside the transaction the old rows are deleted and the new ones inserted. An exception (or a killed
-        process) before COMMIT leaves the previous version untouched.
+        process) before COMMIT leaves the previous version untouched. With ``only_if_building`` the write
+        happens only while the dataset's build is still recorded (checked inside the transaction), so a
+        dataset deleted during its build never comes back: BuildCancelled is raised instead.
         """
         if contours:
             boxes = np.array([c.box for c in contours])
@@ -432,6 +485,8 @@ class CCSStore:
         else:
             bounds = (0.0, 0.0, 0.0, 0.0)
         with self._write() as cur:
+            if only_if_building and not self._is_building(cur, dataset):
+                raise BuildCancelled(f"dataset {dataset!r} was deleted while it built")
             self._delete_rows(cur, dataset)
             counter = (
                 int(cur.execute("SELECT value FROM store_meta WHERE key='version_counter'").fetchone()[0]) + 1
@@ -491,6 +546,74 @@ class CCSStore:
             self._delete_rows(cur, dataset)
             cur.execute("DELETE FROM builds WHERE dataset=?", (dataset,))
         return existed
+
+    def delete_any(self, dataset: str) -> bool:
+        """Remove a dataset, stored or only building or failed; True if there was either."""
+        with self._write() as cur:
+            stored = cur.execute("SELECT 1 FROM datasets WHERE id=?", (dataset,)).fetchone() is not None
+            build = cur.execute("SELECT 1 FROM builds WHERE dataset=?", (dataset,)).fetchone() is not None
+            self._delete_rows(cur, dataset)
+            cur.execute("DELETE FROM builds WHERE dataset=?", (dataset,))
+        return stored or build
+
+    # -- id reservation ----------------------------------------------------------------------------------
+    @staticmethod
+    def _is_building(cur: sqlite3.Cursor, dataset: str) -> bool:
+        row = cur.execute("SELECT state FROM builds WHERE dataset=?", (dataset,)).fetchone()
+        return row is not None and row[0] == "building"
+
+    @staticmethod
+    def _taken(cur: sqlite3.Cursor, dataset: str) -> bool:
+        return (
+            cur.execute("SELECT 1 FROM datasets WHERE id=?", (dataset,)).fetchone() is not None
+            or cur.execute("SELECT 1 FROM builds WHERE dataset=?", (dataset,)).fetchone() is not None
+        )
+
+    @staticmethod
+    def _insert_build(cur: sqlite3.Cursor, dataset: str, total: int) -> None:
+        now = time.time()
+        cur.execute(
+            "INSERT INTO builds VALUES (?,?,?,?,?,?,?,?,?)",
+            (dataset, "building", 0, int(total), None, os.getpid(), _host(), now, now),
+        )
+
+    def reserve(self, dataset: str, total: int = 0) -> bool:
+        """Claim a new dataset id for a build, atomically across threads and processes.
+
+        True when the id was free (neither stored nor building nor failed): a 'building' row now holds it.
+        """
+        with self._write() as cur:
+            if self._taken(cur, dataset):
+                return False
+            self._insert_build(cur, dataset, total)
+        return True
+
+    def reserve_free(self, base: str, total: int = 0) -> str:
+        """Claim ``base``, else ``base-2``, ``base-3``, ... (the first free one), in one transaction."""
+        with self._write() as cur:
+            ident, n = base, 2
+            while self._taken(cur, ident):
+                ident, n = f"{base}-{n}", n + 1
+            self._insert_build(cur, ident, total)
+        return ident
+
+    def fail_build(self, dataset: str, error: str) -> bool:
+        """Mark a running build failed with a reason; False (nothing written) when it was deleted meanwhile."""
+        with self._write() as cur:
+            cur.execute(
+                "UPDATE builds SET state='failed', error=?, updated=? WHERE dataset=? AND state='building'",
+                (error, time.time(), dataset),
+            )
+            return cur.rowcount > 0
+
+    def update_build_progress(self, dataset: str, done: int, total: int) -> bool:
+        """Record progress of a running build from the process doing it; False when the build was deleted."""
+        with self._write() as cur:
+            cur.execute(
+                "UPDATE builds SET done=?, total=?, pid=?, host=?, updated=? WHERE dataset=? AND state='building'",
+                (int(done), int(total), os.getpid(), _host(), time.time(), dataset),
+            )
+            return cur.rowcount > 0
 
     # -- contours ----------------------------------------------------------------------------------------
     def query(self, dataset: str, bounds_3857: Sequence[float]) -> list[int]:

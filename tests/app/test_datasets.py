@@ -75,7 +75,8 @@ def test_upload_builds_in_background_then_delete(client):
     assert tile.status_code == 200
     uploaded = {f["properties"]["elevation"] for f in feats[:6]}
     assert {f["properties"]["elevation"] for f in check_tile(tile.content)} == uploaded
-    assert client.post("/datasets?id=mine", content=body).status_code == 409
+    again = client.post("/datasets?id=mine", content=body, headers={"content-type": "application/geo+json"})
+    assert again.status_code == 409
     assert client.delete("/datasets/mine").status_code == 204
     assert client.get("/datasets/mine").status_code == 404
     assert client.delete("/datasets/mine").status_code == 404

@@ -48,7 +48,7 @@ def test_upload_and_delete_over_loopback(live):
     assert r.status_code == 202
     live.wait_ready("live-up", timeout=120)
     assert httpx.delete(live.url + "/datasets/live-up").status_code == 204
-    big = httpx.post(live.url + "/datasets", content=b"x" * (700 * 1024))
+    big = httpx.post(live.url + "/datasets", content=b"x" * (700 * 1024), headers={"content-type": "application/json"})
     assert big.status_code == 413
     assert httpx.get(live.url + "/healthz").status_code == 200
 
