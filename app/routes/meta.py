@@ -8,6 +8,7 @@ from fastapi import APIRouter, Depends, Request
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 
 from app.dependencies import get_settings
+from app.service import DatasetService
 from app.settings import Settings
 
 router = APIRouter(tags=["meta"])
