@@ -11,6 +11,7 @@ import os
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from contextlib import contextmanager
+from functools import partial
 from typing import Any, ParamSpec, TypeVar
 
 from threadpoolctl import threadpool_limits
@@ -38,7 +39,7 @@ class SingleThreadedExecutor(Executor):
         self.inner = inner
 
     def submit(self, fn: Callable[P, R], /, *args: P.args, **kwargs: P.kwargs) -> Future[R]:  # noqa: D102
-        return self.inner.submit(run_single_threaded, fn, *args, **kwargs)
+        return self.inner.submit(partial(run_single_threaded, fn, *args, **kwargs))
 
     def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:  # noqa: D102
         self.inner.shutdown(wait=wait, cancel_futures=cancel_futures)

@@ -11,6 +11,7 @@ import json
 import os
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -55,6 +56,8 @@ class SourceSpec:
         Human name.
     elevation_field, interval
         Passed to ``read_source`` (a DEM needs ``interval``).
+    block
+        A DEM's window side in cells (see :func:`engine.io.dem.contours_from_dem`); None = chosen by size.
     source_scale, target_scale
         Scale denominators of t = 0 and t = 1.
     """
@@ -66,15 +69,19 @@ class SourceSpec:
     interval: float | None = None
     source_scale: float = 50_000.0
     target_scale: float = 500_000.0
+    block: int | None = None
 
     def params(self) -> dict[str, Any]:
         """The parameters that decide the build (part of the content hash)."""
-        return {
+        params: dict[str, Any] = {
             "elevation_field": self.elevation_field,
             "interval": self.interval,
             "source_scale": self.source_scale,
             "target_scale": self.target_scale,
         }
+        if self.block is not None:  # a DEM's window side decides the lines' ids; absent, older hashes hold
+            params["block"] = self.block
+        return params
 
 
 def slugify(text: str) -> str:
@@ -107,6 +114,7 @@ def build_and_save(
     workers: int | None = None,
     progress: Progress | None = None,
     still_wanted: Callable[[], bool] | None = None,
+    executor: Executor | None = None,
 ) -> DatasetInfo | None:
     """Build every contour of a read source and write the dataset in one transaction.
 
@@ -117,6 +125,8 @@ def build_and_save(
     still_wanted
         Asked once the build is done and before writing: False (the dataset was deleted meanwhile) skips the
         write and returns None.
+    executor
+        Where the contours are built (a Dask cluster, see :mod:`engine.parallel`); None = ``workers``.
 
     Raises
     ------
@@ -125,7 +135,7 @@ def build_and_save(
     """
     started = time.perf_counter()
     build_params = BuildParams(source_scale=params["source_scale"], target_scale=params["target_scale"])
-    built = build_contour_set(contour_set, build_params, workers=workers, progress=progress)
+    built = build_contour_set(contour_set, build_params, workers=workers, progress=progress, executor=executor)
     if still_wanted is not None and not still_wanted():
         return None
     return save_built(
@@ -167,8 +177,12 @@ def build_dataset(
     workers: int | None = None,
     progress: Progress | None = None,
     force: bool = False,
+    executor: Executor | None = None,
 ) -> tuple[DatasetInfo, bool]:
     """Read, build and store one source unless the store already holds it unchanged.
+
+    ``executor`` runs a DEM's windows and the contours' builds (a Dask cluster, see :mod:`engine.parallel`);
+    None = ``workers`` local processes. Either way the same code and the same stored rows.
 
     Returns
     -------
@@ -184,7 +198,9 @@ def build_dataset(
     if not force and store.source_hash_of(spec.dataset) == digest:
         return store.dataset(spec.dataset), False
     BuildParams(source_scale=spec.source_scale, target_scale=spec.target_scale)  # bad scales fail before reading
-    contour_set = read_source(spec.path, elevation_field=spec.elevation_field, interval=spec.interval)
+    contour_set = read_source(
+        spec.path, elevation_field=spec.elevation_field, interval=spec.interval, block=spec.block, executor=executor
+    )
     info = build_and_save(
         store,
         spec.dataset,
@@ -195,6 +211,7 @@ def build_dataset(
         params=spec.params(),
         workers=workers,
         progress=progress,
+        executor=executor,
     )
     assert info is not None  # no still_wanted callback: always written
     return info, True
