@@ -9,13 +9,15 @@ from fastapi import Query, Request
 
 from app.service import DatasetService
 from app.settings import Settings
+from app.store_follow import follow_store
 from engine.types import Method
 
 MethodName = Method
 
 
 def get_service(request: Request) -> DatasetService:
-    """The DatasetService the lifespan put on the app."""
+    """The DatasetService the lifespan put on the app (a new one after the store link moved)."""
+    follow_store(request.app)
     return request.app.state.service  # type: ignore[no-any-return]
 
 

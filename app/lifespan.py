@@ -8,7 +8,7 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 
-from app.service import DatasetService
+from app.store_follow import open_service
 
 log = logging.getLogger("ccsm.app")
 
@@ -17,7 +17,7 @@ log = logging.getLogger("ccsm.app")
 async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     """Open the store and keep the DatasetService on ``app.state``; builds never block startup."""
     settings = app.state.settings
-    service = DatasetService(settings)
+    service = open_service(app)  # a store path that is a link is followed (app/store_follow.py)
     app.state.service = service
     if settings.build_on_start:
         service.start_builds()
@@ -25,4 +25,4 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     try:
         yield
     finally:
-        service.store.close()
+        app.state.service.store.close()

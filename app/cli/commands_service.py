@@ -7,11 +7,14 @@ from collections.abc import Iterator
 from concurrent.futures import Executor
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from app.cli import app
+
+if TYPE_CHECKING:
+    from engine.store.sqlite import CCSStore as CCSStoreType
 
 SourcesArg = Annotated[
     list[Path] | None,
@@ -115,6 +118,13 @@ def build(
             "[none: --workers local processes].",
         ),
     ] = None,
+    publish: Annotated[
+        Path | None,
+        typer.Option(
+            "--publish",
+            help="After the build, point this link (the live store of running replicas) at --store, atomically.",
+        ),
+    ] = None,
     block: Annotated[
         int | None,
         typer.Option(
@@ -187,6 +197,25 @@ def build(
         f"{verb} {info.id} -> {store_path} ({info.n_contours} contours, {info.n_vertices} vertices, "
         f"data_version {info.data_version}, {len(info.bad_features)} bad features)"
     )
+    if publish is not None:
+        publish_store(ccs_store, publish)
+        console.print(f"published {store_path} as {publish}")
+
+
+def publish_store(built: CCSStoreType, live: Path) -> None:
+    """Point the live link at the built store (engine/store/switch.py).
+
+    Exits with status 2 when ``live`` cannot become the link (see :func:`engine.store.switch.publish`).
+    """
+    from engine.errors import StoreError
+    from engine.store.switch import publish
+
+    built.close()
+    try:
+        publish(live, built.path)
+    except StoreError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from None
 
 
 @contextmanager
