@@ -136,3 +136,23 @@ def test_bad_block_and_flat_dem(tmp_path: Path) -> None:
     )
     with pytest.raises(SourceError, match="flat.tif: no contour at interval 10"):
         contours_from_dem(flat, interval=10.0, block=8)
+
+
+def test_large_rasters_are_read_in_windows_without_asking(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import engine.io.dem_windows as dem_windows
+
+    path = write_geotiff(tmp_path / "dem.tif", terrain(), west=WEST, north=NORTH, cell=CELL, crs="EPSG:32616")
+    traced: list[object] = []
+    real = dem_windows.trace_window
+
+    def spy(*args: object) -> object:
+        traced.append(args[1])
+        return real(*args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(dem_windows, "trace_window", spy)
+    whole(path, 10.0)
+    assert traced == []  # 96 x 96 cells: below the threshold, read whole
+    monkeypatch.setattr(dem_windows, "WINDOWED_ABOVE_CELLS", 96 * 96 - 1)
+    monkeypatch.setattr(dem_windows, "DEFAULT_BLOCK", 32)
+    assert_same_lines(whole(path, 10.0), contours_from_dem(path, interval=10.0, block=32))
+    assert len(traced) == 9 + 9  # 3 x 3 windows of 32 cells, for each of the two reads
