@@ -12,7 +12,8 @@ Series
 ``dense``  one DEM at 20, 10 and 5 m intervals: more lines in the same place.
 ``short``  thousands of small hills: rings of a few dozen vertices, the costliest contours per vertex.
 
-Usage: python bench/bench_scale.py [--sizes 1,4,16] [--workers 2]   (each size runs once; 16× takes minutes)
+Usage: python bench/bench_scale.py [--sizes 1,4,16] [--workers 2] [--series sample,grid,dense,short]
+(each build runs once; on a loaded 2-core machine 4× takes about ten minutes, 16× far longer)
 """
 
 from __future__ import annotations
@@ -184,6 +185,7 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--sizes", default="1,4,16", help="Multiples of the 1× terrain's vertices.")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--series", default="sample,grid,dense,short", help="Which series to run.")
     parser.add_argument("--one", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--interval", type=float, default=20.0, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -198,7 +200,10 @@ def main() -> None:
         f"{'tile p50':>8} {'p95 ms':>7}"
     )
     print(header)
+    wanted = set(args.series.split(","))
     for series, label, path, interval in datasets(sizes):
+        if series not in wanted:
+            continue
         r = run_child(path, interval, args.workers)
         per_core = r["vertices"] / r["seconds"] / args.workers
         print(
