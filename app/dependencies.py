@@ -9,6 +9,7 @@ from fastapi import Query, Request
 
 from app.service import DatasetService
 from app.settings import Settings
+from app.store_follow import follow_store
 from engine.errors import StoreNotReady
 from engine.types import Method
 
@@ -16,7 +17,10 @@ MethodName = Method
 
 
 def get_service(request: Request) -> DatasetService:
-    """The DatasetService the lifespan put on the app (StoreNotReady, 503, when the store is unusable)."""
+    """The DatasetService the lifespan put on the app (a new one after the store link moved; StoreNotReady,
+    503, when the store is unusable)."""
+    if request.app.state.service is not None:
+        follow_store(request.app)
     service: DatasetService | None = request.app.state.service
     if service is None:
         raise StoreNotReady(request.app.state.store_problem or "the store is not open")

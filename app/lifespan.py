@@ -10,6 +10,7 @@ from contextlib import asynccontextmanager
 from fastapi import FastAPI
 
 from app.service import DatasetService
+from app.store_follow import open_service
 from engine.errors import StoreError
 
 log = logging.getLogger("ccsm.app")
@@ -25,7 +26,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     settings = app.state.settings
     app.state.store_problem = None
     try:
-        service: DatasetService | None = DatasetService(settings)
+        service: DatasetService | None = open_service(app)  # a store link is followed (app/store_follow.py)
     except StoreError as exc:
         service = None
         app.state.store_problem = str(exc)
@@ -38,5 +39,6 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     try:
         yield
     finally:
-        if service is not None:
-            service.close()
+        final = app.state.service  # a replica may have moved to a newer store file meanwhile
+        for opened in {id(s): s for s in (service, final) if s is not None}.values():
+            opened.close()

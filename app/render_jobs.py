@@ -45,6 +45,7 @@ class TileJob:
     zoom: float
     method: str
     t: float | None
+    store: Path | None = None  # the store file the request's service reads (replicas switch files)
 
 
 @dataclass(frozen=True)
@@ -55,6 +56,7 @@ class MorphJob:
     z: int
     x: int
     y: int
+    store: Path | None = None  # the store file the request's service reads (replicas switch files)
 
 
 @dataclass(frozen=True)
@@ -65,6 +67,7 @@ class SimplifyJob:
     scale: float
     bbox: list[float] | None
     method: str
+    store: Path | None = None  # the store file the request's service reads (replicas switch files)
 
 
 @dataclass(frozen=True)
@@ -78,10 +81,10 @@ class Rendered:
 Job = TileJob | MorphJob | SimplifyJob
 
 
-def make_renderer(config: RenderConfig) -> Renderer:
+def make_renderer(config: RenderConfig, store_path: Path | None = None) -> Renderer:
     """The worker's own store connection and renderer (caches are per worker)."""
     return Renderer(
-        CCSStore(config.store_path),
+        CCSStore(store_path or config.store_path),
         config.tile,
         contour_cache_bytes=config.contour_cache_bytes,
         baseline_cache_entries=config.baseline_cache_entries,
@@ -121,6 +124,7 @@ def worker_main(conn: Connection, config: RenderConfig) -> None:
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     renderer = make_renderer(config)
+    renderer_store = config.store_path
     warm(renderer)
     conn.send(("ready", None))
     while True:
@@ -128,6 +132,11 @@ def worker_main(conn: Connection, config: RenderConfig) -> None:
             job = conn.recv()
         except (EOFError, OSError):  # the server closed the pipe or went away
             return
+        if job.store is not None and job.store != renderer_store:
+            # The service moved to another store file (ccsm build --publish): its caches and data versions
+            # belong to the old file, so the worker starts afresh on the new one.
+            renderer.store.close()
+            renderer, renderer_store = make_renderer(config, job.store), job.store
         try:
             answer: tuple[str, Any] = ("ok", run_job(renderer, job))
         except CCSMError as exc:  # a domain error: the server answers with its status and message

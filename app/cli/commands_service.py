@@ -3,12 +3,18 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
+from concurrent.futures import Executor
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from app.cli import app
+
+if TYPE_CHECKING:
+    from engine.store.sqlite import CCSStore as CCSStoreType
 
 SourcesArg = Annotated[
     list[Path] | None,
@@ -117,6 +123,27 @@ def build(
     force: Annotated[
         bool, typer.Option("--force", help="Rebuild even if the store holds the same source.")
     ] = False,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            "--scheduler",
+            help="Dask scheduler (tcp://HOST:8786) to run the DEM windows and the contours' builds on "
+            "[none: --workers local processes].",
+        ),
+    ] = None,
+    publish: Annotated[
+        Path | None,
+        typer.Option(
+            "--publish",
+            help="After the build, point this link (the live store of running replicas) at --store, atomically.",
+        ),
+    ] = None,
+    block: Annotated[
+        int | None,
+        typer.Option(
+            "--block", min=2, help="GeoTIFF / .asc: trace in windows of this many cells a side [by size]."
+        ),
+    ] = None,
 ) -> None:
     """Precompute a source into the store without serving (one transaction: a killed build changes nothing)."""
     from rich.console import Console
@@ -129,6 +156,8 @@ def build(
     from engine.store.sqlite import CCSStore
 
     console = Console(stderr=True)
+    if scheduler is not None:
+        console.print(f"building on the Dask cluster at {scheduler}")
     settings = Settings()
     store_path = store or settings.store_path
     if source is None:
@@ -147,6 +176,7 @@ def build(
             interval=interval if interval is not None else settings.interval,
             source_scale=source_scale or settings.source_scale,
             target_scale=target_scale or settings.target_scale,
+            block=block,
         )
     console.print(f"building {spec.dataset} from {spec.path.name} into {store_path}")
     try:
@@ -167,9 +197,11 @@ def build(
             def report(done: int, total: int) -> None:
                 progress.update(task, completed=done, total=total)
 
-            info, rebuilt = build_dataset(
-                ccs_store, spec, workers=workers or settings.build_workers, progress=report, force=force
-            )
+            with build_executor(scheduler, workers or settings.build_workers) as executor:
+                info, rebuilt = build_dataset(
+                    ccs_store, spec, workers=workers or settings.build_workers, progress=report, force=force,
+                    executor=executor,
+                )
     except CCSMError as exc:
         console.print(f"[red]error:[/red] {exc}")
         raise typer.Exit(2) from None
@@ -178,3 +210,40 @@ def build(
         f"{verb} {info.id} -> {store_path} ({info.n_contours} contours, {info.n_vertices} vertices, "
         f"data_version {info.data_version}, {len(info.bad_features)} bad features)"
     )
+    if publish is not None:
+        publish_store(ccs_store, publish)
+        console.print(f"published {store_path} as {publish}")
+
+
+def publish_store(built: CCSStoreType, live: Path) -> None:
+    """Point the live link at the built store (engine/store/switch.py).
+
+    Exits with status 2 when ``live`` cannot become the link (see :func:`engine.store.switch.publish`).
+    """
+    from engine.errors import StoreError
+    from engine.store.switch import publish
+
+    built.close()
+    try:
+        publish(live, built.path)
+    except StoreError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from None
+
+
+@contextmanager
+def build_executor(scheduler: str | None, workers: int | None) -> Iterator[Executor | None]:
+    """Where ``ccsm build`` runs its per-window and per-chunk work: the Dask cluster at ``scheduler``, else a
+    pool of ``workers`` local processes (None: one per core), else (one worker) this process."""
+    from engine.parallel import cores, dask_executor, local_pool
+
+    if scheduler is not None:
+        with dask_executor(scheduler) as executor:
+            yield executor
+        return
+    workers = cores() if workers is None else workers
+    if workers <= 1:
+        yield None
+        return
+    with local_pool(workers) as pool:
+        yield pool

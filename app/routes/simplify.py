@@ -72,5 +72,5 @@ async def simplify(
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
-    result = await lanes.heavy.run(SimplifyJob(ident, scale, box, method))
+    result = await lanes.heavy.run(SimplifyJob(ident, scale, box, method, store=service.settings.store_path))
     return body_response(request, result.body or b"", "application/geo+json", headers)

@@ -8,7 +8,8 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Executor
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,6 +19,7 @@ from engine.ccsm.ccs import CCS, build_ccs, check_contour, slice_area
 from engine.ccsm.regression import ScaleModel, fit_scale_model
 from engine.ccsm.topology import crossing_pairs, find_new_crossings
 from engine.errors import CCSMError
+from engine.parallel import local_pool
 from engine.params import BuildParams
 from engine.tolerances import MIN_VISIBLE_RING_SIDE_M, min_ring_area_for_scale
 from engine.types import BadFeature, Contour, ContourSet
@@ -100,10 +102,6 @@ def _build_chunk(
     return out
 
 
-def _single_threaded_blas() -> None:
-    threadpool_limits(1)
-
-
 def default_workers() -> int:
     """Worker processes: one per core the process may use."""
     try:
@@ -118,6 +116,7 @@ def build_contour_set(
     *,
     workers: int | None = None,
     progress: ProgressCallback | None = None,
+    executor: Executor | None = None,
 ) -> BuiltSet:
     """Build the CCS of every contour of ``contour_set``.
 
@@ -131,6 +130,9 @@ def build_contour_set(
         Processes to use; None = one per core, 1 = in this process.
     progress
         Called with (done, total) after each chunk.
+    executor
+        Where the chunks are built (a Dask cluster, see :mod:`engine.parallel`); None = a local pool of
+        ``workers`` processes, or this process.
 
     Returns
     -------
@@ -158,7 +160,7 @@ def build_contour_set(
     total = len(contours)  # contours that passed the check; the rejected ones are reported, not built
     if progress:
         progress(0, total)
-    if workers == 1 or len(chunks) <= 1:
+    if executor is None and (workers == 1 or len(chunks) <= 1):
         with threadpool_limits(1):  # small banded solves: BLAS threads only spin
             for chunk, chunk_labels in chunks:
                 results.extend(_build_chunk(chunk, chunk_labels, params, model))
@@ -167,7 +169,8 @@ def build_contour_set(
                     progress(done, total)
     else:
         # One BLAS thread per worker: OpenBLAS's own threads would fight the worker processes for the cores.
-        with ProcessPoolExecutor(max_workers=workers, initializer=_single_threaded_blas) as pool:
+        # A given executor (a Dask cluster) runs the very same chunks; it is the caller's to shut down.
+        with nullcontext(executor) if executor is not None else local_pool(workers) as pool:
             futures = [pool.submit(_build_chunk, chunk, lab, params, model) for chunk, lab in chunks]
             for fut, (chunk, _) in zip(futures, chunks, strict=True):
                 results.extend(fut.result())

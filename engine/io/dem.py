@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import os
 import zipfile
+from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -75,6 +76,8 @@ def contours_from_dem(
     *,
     interval: float,
     tolerances: Tolerances = DEFAULT_TOLERANCES,
+    block: int | None = None,
+    executor: Executor | None = None,
 ) -> ContourSet:
     """Trace contour lines from a DEM at every multiple of ``interval``.
 
@@ -87,6 +90,12 @@ def contours_from_dem(
         Contour interval in the DEM's vertical unit; levels are the multiples of it within the data's range.
     tolerances
         Cleaning distances in metres (see :func:`engine.io.vector.assemble_contours`).
+    block
+        GeoTIFF / ``.asc`` only: trace in windows of about this many cells a side, joined exactly at their
+        edges (:mod:`engine.io.dem_windows`). None: windows of ``DEFAULT_BLOCK`` cells for a raster of more
+        than ``WINDOWED_ABOVE_CELLS`` cells, else the whole grid at once.
+    executor
+        Where the windows are traced (see :mod:`engine.parallel`); None = in this process.
 
     Returns
     -------
@@ -106,16 +115,37 @@ def contours_from_dem(
     if not (isinstance(interval, (int, float)) and math.isfinite(interval) and interval > 0):
         raise InvalidParameter(f"interval {interval!r} must be a positive number")
     path = Path(path)
-    grid = read_dem(path)
-    parts = trace_contours(grid, float(interval), where=path.name)
+    windowed = _windowed_block(path, block)
+    if windowed is not None:
+        # Imported here: the windowed reader builds on this module's tracing functions.
+        from engine.io.dem_windows import contour_windows
+
+        parts, crs_wkt = contour_windows(path, float(interval), block=windowed, executor=executor)
+        crs = parse_crs(crs_wkt, where=str(path))
+    else:
+        grid = read_dem(path)
+        parts = trace_contours(grid, float(interval), where=path.name)
+        crs = grid.crs
     return assemble_contours(
         parts,
-        source_crs=grid.crs,
+        source_crs=crs,
         where=path.name,
         name=path.stem,
         tolerances=tolerances,
         interval=float(interval),
     )
+
+
+def _windowed_block(path: Path, block: int | None) -> int | None:
+    """The window side to read ``path`` with, or None to read it whole (see :func:`contours_from_dem`)."""
+    from engine.io.dem_windows import DEFAULT_BLOCK, WINDOWED_ABOVE_CELLS, read_header
+
+    if path.suffix.lower() not in RASTER_SUFFIXES or not path.exists():
+        return None
+    if block is not None:
+        return block
+    header = read_header(path)
+    return DEFAULT_BLOCK if header.rows * header.cols > WINDOWED_ABOVE_CELLS else None
 
 
 def read_dem(path: str | os.PathLike[str]) -> DemGrid:
@@ -253,16 +283,25 @@ def trace_contours(grid: DemGrid, interval: float, *, where: str) -> LineParts:
     if z.count() == 0:
         raise SourceError(f"{where}: the DEM has no valid heights")
     zmin, zmax = float(z.min()), float(z.max())
-    levels = contour_levels(zmin, zmax, interval)
-    # Traced in grid index space (x = column, y = row of the pixel centre), then mapped by the geotransform in
-    # one step: this handles north-up, south-up and rotated grids alike.
+    traced = trace_levels(z, contour_levels(zmin, zmax, interval))
+    if not traced:
+        raise SourceError(
+            f"{where}: no contour at interval {interval:g} within the DEM's range [{zmin:g}, {zmax:g}]"
+        )
+    return line_parts_from_traced(traced, grid.transform, where)
+
+
+#: Lines of one level in grid index space: (level, [(n, 2) points of each line]).
+LevelLines = tuple[float, list[NDArray[np.float64]]]
+
+
+def trace_levels(z: np.ma.MaskedArray, levels: NDArray[np.float64]) -> list[LevelLines]:
+    """Lines of every level in grid index space (x = column, y = row of the pixel centre), levels without a
+    line left out; a closed ring repeats its first vertex at the end, as contourpy returns it."""
     generator = contourpy.contour_generator(
         z=z, name="serial", line_type=contourpy.LineType.ChunkCombinedOffset, chunk_size=0
     )
-    pieces: list[NDArray[np.float64]] = []
-    counts: list[NDArray[np.int64]] = []
-    ids: list[FeatureId] = []
-    elevations: list[float] = []
+    out: list[LevelLines] = []
     for level in levels.tolist():
         # ChunkCombinedOffset with one chunk: ([points (n, 2)] or [None], [offsets (m + 1,)] or [None]).
         lines: Any = generator.lines(level + LEVEL_OFFSET)
@@ -271,21 +310,31 @@ def trace_contours(grid: DemGrid, interval: float, *, where: str) -> LineParts:
             continue
         pts = np.asarray(points[0], dtype=np.float64)
         off = np.asarray(offsets[0], dtype=np.int64)
-        pieces.append(pts)
-        counts.append(np.diff(off))
-        label = f"{level:.10g}"
-        ids.extend(f"{label}:{k}" for k in range(len(off) - 1))
-        elevations.extend([level] * (len(off) - 1))
-    if not pieces:
-        raise SourceError(
-            f"{where}: no contour at interval {interval:g} within the DEM's range [{zmin:g}, {zmax:g}]"
-        )
+        out.append((level, np.split(pts, off[1:-1])))
+    return out
+
+
+def line_parts_from_traced(
+    traced: list[LevelLines], transform: tuple[float, float, float, float, float, float], where: str
+) -> LineParts:
+    """Map traced lines to the grid's CRS, ids ``"{elevation}:{k}"``, node artefacts dropped and reported.
+
+    Traced in grid index space, then mapped by the geotransform in one step: this handles north-up,
+    south-up and rotated grids alike.
+    """
+    pieces = [line for _, lines in traced for line in lines]
     uv = np.vstack(pieces)
-    counts_all = np.concatenate(counts)
+    counts_all = np.array([len(line) for line in pieces], dtype=np.int64)
+    ids: list[FeatureId] = []
+    elevations: list[float] = []
+    for level, lines in traced:
+        label = f"{level:.10g}"
+        ids.extend(f"{label}:{k}" for k in range(len(lines)))
+        elevations.extend([level] * len(lines))
     uv, counts_all, ids, elevations, bad = _drop_node_artefacts(uv, counts_all, ids, elevations, where)
     uv, counts_all = _close_touching_rings(uv, counts_all)
     uv = uv + 0.5  # pixel centres sit half a pixel inside the pixel edges
-    a, b, c, d, e, f = grid.transform
+    a, b, c, d, e, f = transform
     xy = np.column_stack([a * uv[:, 0] + b * uv[:, 1] + c, d * uv[:, 0] + e * uv[:, 1] + f])
     return LineParts(
         xy=xy,

@@ -8,6 +8,7 @@ is a :class:`~engine.types.ContourSet` in metres of a projected working CRS.
 from __future__ import annotations
 
 import os
+from concurrent.futures import Executor
 from pathlib import Path
 
 from engine.errors import InvalidParameter, SourceError
@@ -41,6 +42,8 @@ def read_source(
     layer: str | None = None,
     interval: float | None = None,
     tolerances: Tolerances = DEFAULT_TOLERANCES,
+    block: int | None = None,
+    executor: Executor | None = None,
 ) -> ContourSet:
     """Read contours from a contour file or a DEM.
 
@@ -59,6 +62,9 @@ def read_source(
         as given, or inferred from the elevations when None.
     tolerances
         Distances in metres below which vertices merge and lines count as empty.
+    block, executor
+        DEMs only: the window side and where windows are traced (see
+        :func:`engine.io.dem.contours_from_dem`).
 
     Returns
     -------
@@ -91,7 +97,7 @@ def read_source(
             raise SourceError(f"{path}: file not found")
         if interval is None:
             raise InvalidParameter(f"{path}: a DEM needs a contour interval (interval=...)")
-        return contours_from_dem(path, interval=interval, tolerances=tolerances)
+        return contours_from_dem(path, interval=interval, tolerances=tolerances, block=block, executor=executor)
     if not path.exists():
         raise SourceError(f"{path}: file not found")
     raise SourceError(

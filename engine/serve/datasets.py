@@ -13,6 +13,7 @@ import os
 import time
 import unicodedata
 from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Executor
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -58,6 +59,8 @@ class SourceSpec:
         Human name.
     elevation_field, interval
         Passed to ``read_source`` (a DEM needs ``interval``).
+    block
+        A DEM's window side in cells (see :func:`engine.io.dem.contours_from_dem`); None = chosen by size.
     source_scale, target_scale
         Scale denominators of t = 0 and t = 1.
     """
@@ -69,15 +72,19 @@ class SourceSpec:
     interval: float | None = None
     source_scale: float = 50_000.0
     target_scale: float = 500_000.0
+    block: int | None = None
 
     def params(self) -> dict[str, Any]:
         """The parameters that decide the build (part of the content hash)."""
-        return {
+        params: dict[str, Any] = {
             "elevation_field": self.elevation_field,
             "interval": self.interval,
             "source_scale": self.source_scale,
             "target_scale": self.target_scale,
         }
+        if self.block is not None:  # a DEM's window side decides the lines' ids; absent, older hashes hold
+            params["block"] = self.block
+        return params
 
 
 _ID_CHARS = frozenset("abcdefghijklmnopqrstuvwxyz0123456789_-")
@@ -131,6 +138,7 @@ def build_and_save(
     progress: Progress | None = None,
     still_wanted: Callable[[], bool] | None = None,
     only_if_building: bool = False,
+    executor: Executor | None = None,
 ) -> DatasetInfo | None:
     """Build every contour of a read source and write the dataset in one transaction.
 
@@ -144,6 +152,8 @@ def build_and_save(
     only_if_building
         Write only while the store still records this build (checked in the write transaction); raises
         BuildCancelled when the dataset was deleted meanwhile.
+    executor
+        Where the contours are built (a Dask cluster, see :mod:`engine.parallel`); None = ``workers``.
 
     Raises
     ------
@@ -152,7 +162,7 @@ def build_and_save(
     """
     started = time.perf_counter()
     build_params = BuildParams(source_scale=params["source_scale"], target_scale=params["target_scale"])
-    built = build_contour_set(contour_set, build_params, workers=workers, progress=progress)
+    built = build_contour_set(contour_set, build_params, workers=workers, progress=progress, executor=executor)
     if still_wanted is not None and not still_wanted():
         return None
     return save_built(
@@ -197,8 +207,12 @@ def build_dataset(
     progress: Progress | None = None,
     force: bool = False,
     only_if_building: bool = False,
+    executor: Executor | None = None,
 ) -> tuple[DatasetInfo, bool]:
     """Read, build and store one source unless the store already holds it unchanged.
+
+    ``executor`` runs a DEM's windows and the contours' builds (a Dask cluster, see :mod:`engine.parallel`);
+    None = ``workers`` local processes. Either way the same code and the same stored rows.
 
     Returns
     -------
@@ -214,7 +228,9 @@ def build_dataset(
     if not force and store.source_hash_of(spec.dataset) == digest:
         return store.dataset(spec.dataset), False
     BuildParams(source_scale=spec.source_scale, target_scale=spec.target_scale)  # bad scales fail before reading
-    contour_set = read_source(spec.path, elevation_field=spec.elevation_field, interval=spec.interval)
+    contour_set = read_source(
+        spec.path, elevation_field=spec.elevation_field, interval=spec.interval, block=spec.block, executor=executor
+    )
     info = build_and_save(
         store,
         spec.dataset,
@@ -226,6 +242,7 @@ def build_dataset(
         workers=workers,
         progress=progress,
         only_if_building=only_if_building,
+        executor=executor,
     )
     assert info is not None  # no still_wanted callback: always written
     return info, True

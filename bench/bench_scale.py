@@ -1,0 +1,219 @@
+"""Big-region benchmark (issue 12 item 6): build time, vertices/s/core, peak memory, store size and tile times
+as the data grows, on generated terrain, on denser intervals of one DEM, and on thousands of short rings.
+
+Every build runs in its own process (``--one``), so its peak memory is its own: the build process's peak RSS
+and the largest peak of its pool workers are printed apart. The DEMs are fractal terrain (tests'
+``fractal_heights``) written as tiled GeoTIFFs and read in windows of 512 cells.
+
+Series
+------
+``grid``   the same kind of terrain on a grid 2× and 4× as wide (4× and 16× the vertices): lines cross as in
+           real data, so the crossing repair's cost shows (copies side by side would hide it).
+``dense``  one DEM at 20, 10 and 5 m intervals: more lines in the same place.
+``short``  thousands of small hills: rings of a few dozen vertices, the costliest contours per vertex.
+
+Usage: python bench/bench_scale.py [--sizes 1,4,16] [--workers 2] [--series sample,grid,dense,short]
+(each build runs once; on a loaded 2-core machine 4× takes about ten minutes, 16× far longer)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import rasterio
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "tests"))
+
+WORK = REPO / "var" / "bench-scale"
+CELL_M = 30.0
+#: Grid side of the 1× terrain; 2× and 4× the side give 4× and 16× the vertices.
+BASE_SIDE = 512
+
+
+def write_dem(path: Path, z: np.ndarray) -> Path:
+    """A tiled GeoTIFF in UTM 16N (256-cell internal tiles, as a COG has)."""
+    profile = {
+        "driver": "GTiff",
+        "height": z.shape[0],
+        "width": z.shape[1],
+        "count": 1,
+        "dtype": "float32",
+        "crs": "EPSG:32616",
+        "transform": rasterio.Affine(CELL_M, 0.0, 740_000.0, 0.0, -CELL_M, 4_060_000.0),
+        "tiled": True,
+        "blockxsize": 256,
+        "blockysize": 256,
+    }
+    with rasterio.open(path, "w", **profile) as dst:
+        dst.write(z.astype(np.float32), 1)
+    return path
+
+
+def terrain(side: int) -> np.ndarray:
+    """Fractal terrain whose relief grows with the side, so a larger grid holds as many lines per km²."""
+    from synthetic_rasters import fractal_heights
+
+    return fractal_heights(21, 3.6, n=side, relief_m=800.0 * side / BASE_SIDE)
+
+
+def short_hills(side: int, seed: int = 4) -> np.ndarray:
+    """Thousands of small round hills on a flat plain: each a few rings of a few dozen vertices."""
+    rng = np.random.default_rng(seed)
+    r, c = np.mgrid[0:side, 0:side].astype(np.float64)
+    z = np.full((side, side), 100.0)
+    for _ in range(side * side // 60):
+        r0, c0 = rng.uniform(0, side, 2)
+        radius = rng.uniform(1.5, 3.5)
+        near = (np.abs(r - r0) < 4 * radius) & (np.abs(c - c0) < 4 * radius)
+        z[near] += 45.0 * np.exp(-((r[near] - r0) ** 2 + (c[near] - c0) ** 2) / (2 * radius**2))
+    return np.round(z)
+
+
+def datasets(sizes: list[int]) -> list[tuple[str, str, Path, float]]:
+    """(series, label, DEM, interval) of every build to run, the DEMs written once into var/bench-scale."""
+    from engine.io.source import sample_contours_path
+
+    WORK.mkdir(parents=True, exist_ok=True)
+    out = [("sample", "bundled", sample_contours_path(), 0.0)]
+    for k in sizes:
+        side = int(BASE_SIDE * np.sqrt(k))
+        path = WORK / f"terrain-{side}.tif"
+        if not path.exists():
+            write_dem(path, terrain(side))
+        out.append(("grid", f"{k}x", path, 20.0))
+    base = WORK / f"terrain-{BASE_SIDE}.tif"
+    for interval in (10.0, 5.0):
+        if max(sizes) >= 4 or interval == 10.0:
+            out.append(("dense", f"{20 / interval:g}x lines", base, interval))
+    hills = WORK / "hills-384.tif"
+    if not hills.exists():
+        write_dem(hills, short_hills(384))
+    out.append(("short", "rings", hills, 10.0))
+    return out
+
+
+def build_one(path: Path, interval: float, workers: int) -> dict[str, float]:
+    """Build one DEM into a fresh store (this process); the numbers as a dict."""
+    import engine.ccsm.build as build_module
+    from engine.serve.datasets import SourceSpec, build_dataset
+    from engine.store.sqlite import CCSStore
+
+    repair_s = [0.0]
+    resolve = build_module.resolve_crossings
+
+    def timed_resolve(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202 - times the repair, changes nothing
+        t0 = time.perf_counter()
+        try:
+            return resolve(*args, **kwargs)
+        finally:
+            repair_s[0] += time.perf_counter() - t0
+
+    build_module.resolve_crossings = timed_resolve
+    store_path = WORK / f"{path.stem}-{interval:g}.sqlite"
+    for stale in WORK.glob(f"{store_path.name}*"):
+        stale.unlink()
+    store = CCSStore(store_path)
+    dem = path.suffix == ".tif"
+    spec = SourceSpec(path, "bench", path.stem, interval=interval if dem else None, block=512 if dem else None)
+    from app.cli.commands_service import build_executor
+
+    t0 = time.perf_counter()
+    with build_executor(None, workers) as executor:
+        info, _ = build_dataset(store, spec, workers=workers, executor=executor, force=True)
+    seconds = time.perf_counter() - t0
+    store.close()
+    p50, p95 = tile_times(store_path)
+    return {
+        "contours": info.n_contours,
+        "vertices": info.n_vertices,
+        "seconds": seconds,
+        "repair_s": repair_s[0],
+        "rss_main_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "rss_worker_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024,
+        "store_mb": store_path.stat().st_size / 1e6,
+        "tile_p50_ms": p50,
+        "tile_p95_ms": p95,
+    }
+
+
+def tile_times(store_path: Path, n: int = 120) -> tuple[float, float]:
+    """p50 and p95 of rendering ``n`` distinct z12-z14 tiles of the store, each read cold (new renderer)."""
+    from engine.serve.renderer import Renderer
+    from engine.store.sqlite import CCSStore
+    from engine.tiles.grid import tiles_covering
+    from engine.types import Bounds
+
+    store = CCSStore(store_path, readonly=True)
+    info = store.dataset("bench")
+    tiles = [t for z in (12, 13, 14) for t in tiles_covering(Bounds(*info.bounds_3857), z)]
+    rng = np.random.default_rng(0)
+    chosen = [tiles[i] for i in rng.choice(len(tiles), size=min(n, len(tiles)), replace=False)]
+    renderer = Renderer(store)
+    renderer.pack("bench")  # the per-dataset pack is loaded once per process, not per tile
+    times = []
+    for z, x, y in chosen:
+        t0 = time.perf_counter()
+        renderer.tile("bench", z, x, y)
+        times.append(time.perf_counter() - t0)
+    ms = np.array(times) * 1000
+    return float(np.percentile(ms, 50)), float(np.percentile(ms, 95))
+
+
+def run_child(path: Path, interval: float, workers: int) -> dict[str, float]:
+    out = subprocess.run(
+        [sys.executable, __file__, "--one", str(path), "--interval", str(interval), "--workers", str(workers)],
+        cwd=REPO,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--sizes", default="1,4,16", help="Multiples of the 1× terrain's vertices.")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--series", default="sample,grid,dense,short", help="Which series to run.")
+    parser.add_argument("--one", type=Path, help=argparse.SUPPRESS)
+    parser.add_argument("--interval", type=float, default=20.0, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.one:
+        print(json.dumps(build_one(args.one, args.interval, args.workers)))
+        return
+    sizes = [int(s) for s in args.sizes.split(",")]
+    print(f"{args.workers} build workers; sample-relative sizes in vertices; times on a shared machine")
+    header = (
+        f"{'series':7} {'data':11} {'contours':>8} {'vertices':>9} {'build s':>8} {'repair':>7} "
+        f"{'vert/s/core':>11} {'µs/vertex':>9} {'RSS main':>8} {'RSS wkr':>8} {'store MB':>8} "
+        f"{'tile p50':>8} {'p95 ms':>7}"
+    )
+    print(header)
+    wanted = set(args.series.split(","))
+    for series, label, path, interval in datasets(sizes):
+        if series not in wanted:
+            continue
+        r = run_child(path, interval, args.workers)
+        per_core = r["vertices"] / r["seconds"] / args.workers
+        print(
+            f"{series:7} {label:11} {r['contours']:8.0f} {r['vertices']:9.0f} {r['seconds']:8.1f} "
+            f"{r['repair_s'] / r['seconds']:6.0%} {per_core:11.0f} {1e6 / per_core:9.1f} "
+            f"{r['rss_main_mb']:8.0f} {r['rss_worker_mb']:8.0f} {r['store_mb']:8.1f} "
+            f"{r['tile_p50_ms']:8.2f} {r['tile_p95_ms']:7.2f}",
+            flush=True,
+        )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,200 @@
+"""Contours of a DEM too large to hold whole: traced window by window and joined exactly across window edges.
+
+Why the joins are exact (docs/design.md section 6, "Large DEMs in windows"): neighbouring windows share one
+row or column of grid nodes, so the marching-squares cells of the grid are split between the windows with
+none left out and none traced twice. contourpy places a line's vertex on a cell edge from the heights of that
+edge's two nodes only, so a line leaving one window through the shared row ends at the very point where the
+line in the next window starts. The reader joins the two pieces there and keeps that vertex once: the result
+has the vertices a whole-grid trace gives, no gap, no duplicate and no kink, so CCSM sees the same lines
+whichever window size was used. Lines are joined, not split at window edges, because a split would pin a
+vertex of the line at every window edge at every scale.
+
+Only one window of heights is in memory at a time (plus the lines traced so far); the windows can be traced
+on a process pool or a Dask cluster (:mod:`engine.parallel`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from concurrent.futures import Executor
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import rasterio
+from numpy.typing import NDArray
+from rasterio.errors import RasterioError
+from rasterio.windows import Window
+from scipy.spatial import cKDTree
+
+from engine.errors import InvalidParameter, SourceError
+from engine.io.dem import LevelLines, contour_levels, line_parts_from_traced, trace_levels
+from engine.io.vector import LineParts
+from engine.parallel import map_ordered
+
+#: Window side in cells when the caller gives none: 2049 × 2049 float64 heights are 34 MB.
+DEFAULT_BLOCK = 2048
+
+#: Rasters with more cells than this are read in windows; smaller ones whole (a 4096² grid is 134 MB).
+WINDOWED_ABOVE_CELLS = 4096 * 4096
+
+#: Two piece ends closer than this (in pixels) are the same vertex traced from both sides of a window edge.
+#: Both sides compute it from the same two node heights, so they agree to rounding (about 1e-12 pixel).
+JOIN_TOLERANCE_PX = 1e-6
+
+
+@dataclass(frozen=True)
+class RasterHeader:
+    """What the windowed reader needs to know of a raster before reading any height."""
+
+    rows: int
+    cols: int
+    transform: tuple[float, float, float, float, float, float]
+    crs_wkt: str
+    tile_shape: tuple[int, int] | None  # internal tiles (rows, cols) of a tiled GeoTIFF, else None
+
+
+def read_header(path: Path) -> RasterHeader:
+    """Size, geotransform, CRS and internal tiling of a raster.
+
+    Raises
+    ------
+    SourceError
+        Unreadable file or no CRS.
+    """
+    try:
+        with rasterio.open(path) as src:
+            if src.crs is None:
+                hint = " (is the .prj file missing?)" if path.suffix.lower() == ".asc" else ""
+                raise SourceError(f"{path}: the DEM has no CRS{hint}")
+            t = src.transform
+            tiled = bool(src.profile.get("tiled", False))
+            return RasterHeader(
+                rows=src.height,
+                cols=src.width,
+                transform=(t.a, t.b, t.c, t.d, t.e, t.f),
+                crs_wkt=src.crs.to_wkt(),
+                tile_shape=tuple(src.block_shapes[0]) if tiled else None,  # type: ignore[arg-type]
+            )
+    except RasterioError as exc:
+        raise SourceError(f"{path}: cannot read DEM ({exc})") from exc
+
+
+def window_starts(n: int, block: int) -> list[int]:
+    """First node index of each window along an axis of ``n`` nodes; window k spans starts[k] .. starts[k+1].
+
+    >>> window_starts(10, 4)
+    [0, 4, 8, 9]
+    """
+    starts = list(range(0, n - 1, block))
+    return [*starts, n - 1]
+
+
+def windows(header: RasterHeader, block: int) -> Iterator[Window]:
+    """Windows of about ``block`` cells a side, row by row, sharing their edge row and column of nodes.
+
+    In a tiled GeoTIFF the side is rounded up to whole internal tiles, so a window reads each tile once (and
+    one row and column of the next).
+    """
+    rows_step = cols_step = block
+    if header.tile_shape is not None:
+        th, tw = header.tile_shape
+        rows_step, cols_step = -(-block // th) * th, -(-block // tw) * tw
+    row_edges = window_starts(header.rows, rows_step)
+    col_edges = window_starts(header.cols, cols_step)
+    for r0, r1 in zip(row_edges[:-1], row_edges[1:], strict=True):
+        for c0, c1 in zip(col_edges[:-1], col_edges[1:], strict=True):
+            yield Window(c0, r0, c1 - c0 + 1, r1 - r0 + 1)
+
+
+def trace_window(path: str, window: Window, interval: float) -> tuple[list[LevelLines], float, float]:
+    """The lines of one window in whole-grid index space, and the window's height range (nan, nan if empty).
+
+    A module-level function of plain arguments, so a worker process or a Dask worker can run it.
+    """
+    with rasterio.open(path) as src:
+        z = np.ma.masked_invalid(src.read(1, window=window, masked=True).astype(np.float64))
+    if z.count() == 0:
+        return [], float("nan"), float("nan")
+    zmin, zmax = float(z.min()), float(z.max())
+    shift = np.array([window.col_off, window.row_off], dtype=np.float64)
+    levels = contour_levels(zmin, zmax, interval)
+    traced = [(level, [line + shift for line in lines]) for level, lines in trace_levels(z, levels)]
+    return traced, zmin, zmax
+
+
+def join_pieces(pieces: list[NDArray[np.float64]]) -> list[NDArray[np.float64]]:
+    """Join the pieces of one level that meet end to start into whole lines, keeping each shared vertex once.
+
+    Pieces come in window order. Rings closed within a window and lines from their first piece come first,
+    in that order, then rings cut by window edges: the same order on every run and on every executor. A
+    closed ring repeats its first vertex at the end, as contourpy's rings do.
+    """
+    is_open = np.array([not np.array_equal(p[0], p[-1]) for p in pieces])
+    open_ids = np.flatnonzero(is_open)
+    successor = np.full(len(pieces), -1, dtype=np.intp)
+    if len(open_ids) > 1:
+        starts = np.array([pieces[i][0] for i in open_ids])
+        ends = np.array([pieces[i][-1] for i in open_ids])
+        dist, hit = cKDTree(starts).query(ends, distance_upper_bound=JOIN_TOLERANCE_PX)
+        found = np.isfinite(dist)
+        successor[open_ids[found]] = open_ids[hit[found]]
+    has_predecessor = np.zeros(len(pieces), dtype=bool)
+    has_predecessor[successor[successor >= 0]] = True
+    done = np.zeros(len(pieces), dtype=bool)
+    lines: list[NDArray[np.float64]] = []
+    # First pass: whole rings and lines from their first piece; second pass: what is left are cut rings.
+    for first_pass in (True, False):
+        for i in range(len(pieces)):
+            if done[i] or (first_pass and has_predecessor[i]):
+                continue
+            chain = [i]
+            done[i] = True
+            while successor[chain[-1]] >= 0 and not done[successor[chain[-1]]]:
+                chain.append(int(successor[chain[-1]]))
+                done[chain[-1]] = True
+            line = np.vstack([pieces[chain[0]], *(pieces[k][1:] for k in chain[1:])])
+            if not first_pass:
+                line[-1] = line[0]  # a ring cut by window edges: closed on its first vertex exactly
+            lines.append(line)
+    return lines
+
+
+def contour_windows(
+    path: Path, interval: float, *, block: int = DEFAULT_BLOCK, executor: Executor | None = None
+) -> tuple[LineParts, str]:
+    """Trace a raster DEM window by window (see the module's docstring) and join the lines.
+
+    Returns
+    -------
+    (parts, crs_wkt)
+        Lines in the grid's CRS as :func:`engine.io.dem.trace_contours` gives them, and the grid's CRS.
+
+    Raises
+    ------
+    InvalidParameter
+        ``block`` is below 1, or the interval gives more than :data:`~engine.io.dem.MAX_LEVELS` levels.
+    SourceError
+        Unreadable file, no CRS, no valid height or no contour.
+    """
+    if block < 1:
+        raise InvalidParameter(f"block {block} must be at least 1 cell")
+    header = read_header(path)
+    if header.rows < 2 or header.cols < 2:
+        raise SourceError(f"{path.name}: a DEM needs at least 2 x 2 cells, got {header.rows} x {header.cols}")
+    tasks = [(str(path), w, interval) for w in windows(header, block)]
+    by_level: dict[float, list[NDArray[np.float64]]] = {}
+    zmin, zmax = np.inf, -np.inf
+    for traced, lo, hi in map_ordered(executor, trace_window, tasks):
+        zmin, zmax = np.fmin(zmin, lo), np.fmax(zmax, hi)
+        for level, lines in traced:
+            by_level.setdefault(level, []).extend(lines)
+    if not np.isfinite(zmin):
+        raise SourceError(f"{path.name}: the DEM has no valid heights")
+    contour_levels(float(zmin), float(zmax), interval)  # raises InvalidParameter beyond MAX_LEVELS levels
+    if not by_level:
+        raise SourceError(
+            f"{path.name}: no contour at interval {interval:g} within the DEM's range [{zmin:g}, {zmax:g}]"
+        )
+    joined = [(level, join_pieces(by_level[level])) for level in sorted(by_level)]
+    return line_parts_from_traced(joined, header.transform, path.name), header.crs_wkt

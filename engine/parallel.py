@@ -1,0 +1,95 @@
+"""Where the per-block and per-chunk work of a build runs: this process, a local process pool, or a Dask cluster.
+
+Every caller hands its work to a :class:`concurrent.futures.Executor` and reads the results in submission
+order, so a build is the same code whichever executor runs it (issue 12 item 3). A Dask cluster is reached
+through ``distributed.Client.get_executor()``, which is such an executor too.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterator
+from concurrent.futures import Executor, Future, ProcessPoolExecutor
+from contextlib import contextmanager
+from functools import partial
+from typing import Any, ParamSpec, TypeVar
+
+from threadpoolctl import threadpool_limits
+
+from engine.errors import InvalidParameter
+
+P = ParamSpec("P")
+R = TypeVar("R")
+
+#: Seconds to wait for a Dask scheduler to answer before the build gives up with a clear error.
+CONNECT_TIMEOUT_S = 20
+
+
+def run_single_threaded(fn: Callable[..., R], *args: Any, **kwargs: Any) -> R:
+    """Call ``fn`` with one BLAS thread: a worker's small banded solves only spin on more, and fight the
+    other workers for the cores."""
+    with threadpool_limits(1):
+        return fn(*args, **kwargs)
+
+
+class SingleThreadedExecutor(Executor):
+    """An executor that runs each task of another one with one BLAS thread (see :func:`run_single_threaded`)."""
+
+    def __init__(self, inner: Executor) -> None:
+        self.inner = inner
+
+    def submit(self, fn: Callable[P, R], /, *args: P.args, **kwargs: P.kwargs) -> Future[R]:  # noqa: D102
+        return self.inner.submit(partial(run_single_threaded, fn, *args, **kwargs))
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:  # noqa: D102
+        self.inner.shutdown(wait=wait, cancel_futures=cancel_futures)
+
+
+def _one_blas_thread() -> None:
+    threadpool_limits(1)
+
+
+def local_pool(workers: int) -> Executor:
+    """A process pool of ``workers`` processes, each with one BLAS thread."""
+    return ProcessPoolExecutor(max_workers=workers, initializer=_one_blas_thread)
+
+
+@contextmanager
+def dask_executor(address: str) -> Iterator[Executor]:
+    """An executor on the Dask cluster whose scheduler listens at ``address`` (``tcp://HOST:8786``).
+
+    Raises
+    ------
+    InvalidParameter
+        No scheduler answers at ``address`` within :data:`CONNECT_TIMEOUT_S` seconds.
+    """
+    from distributed import Client  # imported here: only a cluster build needs it
+
+    try:
+        client = Client(address, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
+    except (OSError, TimeoutError) as exc:
+        raise InvalidParameter(f"scheduler {address}: cannot connect ({exc})") from exc
+    try:
+        yield SingleThreadedExecutor(client.get_executor())
+    finally:
+        client.close()
+
+
+def map_ordered(executor: Executor | None, fn: Callable[..., R], tasks: list[tuple[Any, ...]]) -> Iterator[R]:
+    """``fn(*task)`` for every task, yielded in the tasks' order; in this process when ``executor`` is None."""
+    if executor is None:
+        with threadpool_limits(1):
+            for task in tasks:
+                yield fn(*task)
+        return
+    futures = [executor.submit(fn, *task) for task in tasks]
+    for fut in futures:
+        yield fut.result()
+
+
+def cores() -> int:
+    """Cores this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
