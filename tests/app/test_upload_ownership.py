@@ -179,13 +179,17 @@ def test_issue_10_failed_dataset_can_be_deleted_and_uploaded_again(client):
     store = client.app.state.service.store
     store.set_build_status("broken", "failed", 0, 0, "the build was interrupted")
     assert client.get("/datasets/broken").json()["state"] == "failed"
+    ready = client.get("/readyz")
+    assert ready.status_code == 503 and "'broken' failed to build" in " ".join(ready.json()["problems"])
     assert client.post("/datasets?id=broken", content=BODY, headers=GEOJSON).status_code == 409
     assert client.delete("/datasets/broken").status_code == 204
     assert client.get("/datasets/broken").status_code == 404
     r = client.post("/datasets?id=broken", content=BODY, headers=GEOJSON)
     assert r.status_code == 202, r.text
+    building = client.get("/readyz").json()["problems"]
     client.app.state.service.wait_for_builds(120)
     assert client.get("/datasets/broken").json()["state"] == "ready"
+    assert client.get("/readyz").status_code == 200, building
 
 
 def test_issue_10_deleted_configured_source_does_not_show_building(client):

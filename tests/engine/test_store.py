@@ -135,3 +135,65 @@ def test_packed_tiles_equal_contour_by_contour(store):
                 assert a.data == b.data and a.features == b.features
                 n += a.features
     assert n > 0
+
+
+# -- issue 10: ids reserved atomically, builds that cannot resurrect a deleted dataset, damage detected -------
+
+
+def _reserve_in_processes(path, ident, n, free):
+    """n processes (fresh connections each) claim one id at once; their answers."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("spawn")
+    with ctx.Pool(n) as pool:
+        return pool.starmap(_claim, [(str(path), ident, free)] * n)
+
+
+def _claim(path, ident, free):
+    s = CCSStore(path)
+    return s.reserve_free(ident) if free else s.reserve(ident)
+
+
+def test_issue_10_reserve_is_atomic_across_processes(store, tmp_path):
+    answers = _reserve_in_processes(store.path, "race", 6, free=False)
+    assert sorted(answers) == [False] * 5 + [True]
+    assert "race" in store.build_statuses()  # (reported failed: the claiming process is gone)
+    assert not store.reserve("h")  # a stored dataset is taken too
+    names = _reserve_in_processes(store.path, "twin", 6, free=True)
+    assert sorted(names) == sorted(["twin"] + [f"twin-{k}" for k in range(2, 7)])
+
+
+def test_issue_10_failed_id_is_taken_until_deleted(store):
+    assert store.reserve("x")
+    assert store.fail_build("x", "broken")
+    assert not store.reserve("x")
+    assert store.delete_any("x") and not store.delete_any("x")
+    assert store.reserve("x")
+
+
+def test_issue_10_a_build_deleted_meanwhile_writes_nothing(store, src):
+    from engine.errors import BuildCancelled
+
+    assert store.reserve("late")
+    assert store.update_build_progress("late", 1, 8)
+    assert store.delete_any("late")
+    assert not store.update_build_progress("late", 2, 8)  # the build learns it was deleted
+    assert not store.fail_build("late", "x")  # and cannot bring it back as failed
+    with pytest.raises(BuildCancelled):
+        build_dataset(store, SourceSpec(src, "late", "late"), workers=1, only_if_building=True)
+    assert store.data_version("late") is None and "late" not in store.build_statuses()
+
+
+def test_issue_10_quick_check_finds_flipped_bytes(store, tmp_path):
+    assert store.quick_check() == "ok"
+    store.checkpoint()
+    data = bytearray(store.path.read_bytes())
+    for i in range(4096, len(data), 991):
+        data[i] ^= 0xFF
+    bad = tmp_path / "bad.sqlite"
+    bad.write_bytes(bytes(data))
+    try:
+        problem = CCSStore(bad).quick_check()
+    except StoreError as exc:
+        problem = str(exc)
+    assert problem != "ok" and problem
