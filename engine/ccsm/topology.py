@@ -8,12 +8,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 import shapely
 from numpy.typing import NDArray
 
+from engine.ccsm.sweep import pieces_meet
 from engine.types import Coords
 
 if TYPE_CHECKING:
@@ -24,6 +26,9 @@ CHECK_THREADS = 2
 
 #: Segments per indexed piece: small boxes for the index, few enough pieces to keep the query cheap.
 PIECE_SEGMENTS = 24
+#: Segments per piece in :func:`sweep_contacts`: the exact test compares every vertex of one piece with
+#: every segment of the other, so its pieces are shorter (12 was fastest on the sample, against 6 and 24).
+SWEEP_PIECE_SEGMENTS = 12
 
 
 def _pieces(lines: Sequence[Coords]) -> tuple[NDArray[np.object_], NDArray[np.intp]]:
@@ -71,12 +76,133 @@ def crossing_pairs(lines: Sequence[Coords], only: set[int] | None = None) -> set
     return {(int(min(x, y)), int(max(x, y))) for x, y in zip(oa.tolist(), ob.tolist(), strict=True)}
 
 
-def neighbours(surfaces: Sequence[CCS], of: set[int]) -> NDArray[np.intp]:
-    """Indices of the surfaces whose extent (over every t) overlaps that of one of ``of``, those included."""
-    boxes = shapely.box(*np.array([s.bounds for s in surfaces]).T)
-    tree = shapely.STRtree(boxes)
-    _, hits = tree.query(boxes[sorted(of)])
-    return np.unique(np.concatenate([hits, np.array(sorted(of), dtype=np.intp)]))
+def _piece_ranges(lines: Sequence[Coords], size: int) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]:
+    """Pieces of at most ``size`` segments of the lines concatenated: first and last point, owner."""
+    sizes = np.array([len(line) for line in lines], dtype=np.intp)
+    offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
+    usable = np.flatnonzero(sizes >= 2)
+    n, off = sizes[usable], offsets[usable]
+    per_line = (n - 2) // size + 1
+    owner = np.repeat(usable, per_line)
+    k = np.arange(per_line.sum()) - np.repeat(np.cumsum(per_line) - per_line, per_line)
+    first = np.repeat(off, per_line) + k * size
+    last = np.minimum(first + size, np.repeat(off + n - 1, per_line))
+    return first.astype(np.intp), last.astype(np.intp), owner.astype(np.intp)
+
+
+@dataclass(frozen=True)
+class SweepIndex:
+    """Lines whose vertices each move on a straight path, cut into pieces, and the pairs of pieces of
+    different lines whose paths' boxes overlap: the only pairs that can ever meet.
+
+    Built once for a set of CCS (``base`` and ``top`` rows: a slice at any t lies between them, vertex by
+    vertex), it answers for any two t per line (:meth:`contacts`) with no new spatial index.
+
+    Attributes
+    ----------
+    base, top
+        (N, 2) float64 points of all lines concatenated, at t = 0 and t = 1 (metres).
+    line_of_point
+        (N,) index of the line each point belongs to.
+    first, last, owner
+        (P,) first and last point of each piece, and its line.
+    p, q
+        (K,) candidate pairs of pieces, each pair once.
+    """
+
+    base: NDArray[np.float64]
+    top: NDArray[np.float64]
+    line_of_point: NDArray[np.intp]
+    first: NDArray[np.intp]
+    last: NDArray[np.intp]
+    owner: NDArray[np.intp]
+    p: NDArray[np.intp]
+    q: NDArray[np.intp]
+
+    @classmethod
+    def of(cls, bases: Sequence[Coords], tops: Sequence[Coords], only: set[int] | None = None) -> SweepIndex:
+        """Index lines given by their rows at t = 0 and t = 1; with ``only``, keep just the pairs of pieces
+        that involve one of these line indices."""
+        first, last, owner = _piece_ranges(bases, SWEEP_PIECE_SEGMENTS)
+        sizes = np.array([len(line) for line in bases], dtype=np.intp)
+        base = _stacked(bases)
+        top = _stacked(tops)
+        line_of_point = np.repeat(np.arange(len(bases)), sizes).astype(np.intp)
+        if len(first) == 0:
+            empty = np.zeros(0, dtype=np.intp)
+            return cls(base, top, line_of_point, first, last, owner, empty, empty)
+        # Every slice of a piece, at any t, stays inside the box of its rows at t = 0 and t = 1.
+        lo = _per_piece(np.minimum, np.minimum(base, top), first, last)
+        hi = _per_piece(np.maximum, np.maximum(base, top), first, last)
+        boxes = shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1])
+        probes = np.arange(len(boxes)) if only is None else np.flatnonzero(np.isin(owner, list(only)))
+        p, q = shapely.STRtree(boxes).query(boxes[probes])
+        p = probes[p]
+        # Each pair of pieces once: a probed piece meets a piece of a line that is not probed from its side only.
+        keep = owner[p] < owner[q]
+        if only is not None:
+            keep |= (owner[p] != owner[q]) & ~np.isin(owner[q], list(only))
+        return cls(base, top, line_of_point, first, last, owner, p[keep], q[keep])
+
+    def contacts(
+        self, t0: NDArray[np.float64], t1: NDArray[np.float64], shown: NDArray[np.bool_] | None = None
+    ) -> set[tuple[int, int]]:
+        """Pairs (i, j), i < j, of lines that meet while each line i goes from its slice at ``t0[i]`` to its
+        slice at ``t1[i]``, all at one pace (``engine.ccsm.sweep``); lines not ``shown`` are left out."""
+        tp0 = t0[self.line_of_point][:, None]
+        tp1 = t1[self.line_of_point][:, None]
+        a = self.base + tp0 * (self.top - self.base)
+        b = self.base + tp1 * (self.top - self.base)
+        p, q = self.p, self.q
+        if shown is not None:
+            both = shown[self.owner[p]] & shown[self.owner[q]]
+            p, q = p[both], q[both]
+        # Pieces whose boxes over this motion miss each other cannot meet: most pairs end here.
+        lo = _per_piece(np.minimum, np.minimum(a, b), self.first, self.last)
+        hi = _per_piece(np.maximum, np.maximum(a, b), self.first, self.last)
+        near = np.all((lo[p] <= hi[q]) & (lo[q] <= hi[p]), axis=1)
+        p, q = p[near], q[near]
+        hit = pieces_meet(a, b, self.first, self.last, p, q)
+        op, oq = self.owner[p[hit]], self.owner[q[hit]]
+        return {(int(min(x, y)), int(max(x, y))) for x, y in zip(op.tolist(), oq.tolist(), strict=True)}
+
+
+def sweep_contacts(
+    start: Sequence[Coords], end: Sequence[Coords], only: set[int] | None = None
+) -> set[tuple[int, int]]:
+    """Pairs (i, j), i < j, of lines that meet at some moment while every vertex moves straight, at one
+    pace, from its place in ``start`` to its place in ``end`` (``engine.ccsm.sweep``).
+
+    Parameters
+    ----------
+    start, end
+        The lines at both ends of the motion, (n_i, 2) arrays in one metric CRS; ``end[i]`` has the
+        vertices of ``start[i]``.
+    only
+        If given, only pairs that involve one of these line indices are looked for.
+
+    >>> a = np.array([[0.0, 0.0], [10.0, 0.0]])
+    >>> b0, b1 = np.array([[5.0, 5.0], [5.0, 9.0]]), np.array([[5.0, -5.0], [5.0, -1.0]])
+    >>> sweep_contacts([a, b0], [a, b1])  # b passes through a on its way down, and is apart at both ends
+    {(0, 1)}
+    """
+    n = len(start)
+    return SweepIndex.of(start, end, only).contacts(np.zeros(n), np.ones(n))
+
+
+def _stacked(lines: Sequence[Coords]) -> NDArray[np.float64]:
+    """The lines' points concatenated, (N, 2) float64."""
+    if not len(lines):
+        return np.zeros((0, 2))
+    return np.concatenate([np.asarray(line, dtype=np.float64) for line in lines])
+
+
+def _per_piece(
+    ufunc: np.ufunc, values: NDArray[np.float64], first: NDArray[np.intp], last: NDArray[np.intp]
+) -> NDArray[np.float64]:
+    """``ufunc`` (np.minimum or np.maximum) of ``values`` over each piece's points first..last."""
+    # reduceat runs up to the next piece's first point; a piece of the same line starts at this one's last.
+    return np.asarray(ufunc(ufunc.reduceat(values, first, axis=0), values[last]))
 
 
 def find_new_crossings(
@@ -86,32 +212,32 @@ def find_new_crossings(
     allowed: set[tuple[int, int]],
     only: set[int] | None = None,
 ) -> set[int]:
-    """Indices of surfaces whose slice crosses another visible slice at a checked scale, beyond ``allowed``.
+    """Indices of surfaces whose slice meets another visible slice at any scale from ``ladder[k]`` to
+    ``ladder[k + 1]`` for k in ``steps``, beyond ``allowed``.
+
+    Between two neighbouring ladder scales each slice's vertices move straight at one pace
+    (docs/design.md section 4.8), so :class:`SweepIndex` covers every scale of the step, not a sample.
+    The rings visible at ``ladder[k]`` are checked over the whole step (a ring only vanishes as the scale
+    grows, so this is every ring shown in it).
 
     Parameters
     ----------
     surfaces
         Every CCS of the set, each with its ``t_at_scale`` table on ``ladder``.
     ladder, steps
-        The scale ladder and the indices of it to check.
+        The scale ladder and the indices k of the steps (ladder[k], ladder[k + 1]) to check.
     allowed
         Pairs (i, j), i < j, that already meet in the input.
     only
-        Restrict the search to crossings that involve these surfaces (the ones just rebuilt) and their
-        neighbours.
+        Restrict the search to crossings that involve these surfaces (the ones just rebuilt).
     """
-    candidates = np.arange(len(surfaces)) if only is None else neighbours(surfaces, only)
-    vanish = np.array([surfaces[i].vanish_scale for i in candidates])
+    index = SweepIndex.of([s.base for s in surfaces], [s.top for s in surfaces], only)
+    tables = np.array([s.t_at_scale for s in surfaces]).reshape(len(surfaces), -1)
+    vanish = np.array([s.vanish_scale for s in surfaces])
 
     def check(k: int) -> set[int]:
-        visible = candidates[vanish > ladder[k]]
-        local_only = None if only is None else {int(j) for j in np.flatnonzero(np.isin(visible, list(only)))}
-        if local_only is not None and not local_only:
-            return set()
-        lines = [surfaces[i].at(float(surfaces[i].t_at_scale[k])) for i in visible]
         found: set[int] = set()
-        for a, b in crossing_pairs(lines, local_only):
-            pair = (int(visible[a]), int(visible[b]))
+        for pair in index.contacts(tables[:, k], tables[:, k + 1], vanish > ladder[k]):
             if pair not in allowed:
                 found.update(pair)
         return found
