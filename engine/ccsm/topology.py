@@ -244,3 +244,48 @@ def find_new_crossings(
 
     with ThreadPoolExecutor(max_workers=CHECK_THREADS) as pool:
         return set().union(*pool.map(check, steps))
+
+
+def _orientation(a: NDArray[np.float64], b: NDArray[np.float64], c: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Sign of the turn a -> b -> c for broadcast (..., 2) points: > 0 left, < 0 right, 0 on one line."""
+    return np.sign(
+        (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0])
+    )
+
+
+def lines_cross_properly(a: Coords, b: Coords) -> bool:
+    """Whether a segment of ``a`` and a segment of ``b`` cross at a point inside both (a *proper* crossing).
+
+    Touching (a vertex on the other line, shared vertices, overlapping collinear pieces) is not a proper
+    crossing. This is the test for quantised tile geometry (docs/design.md section 4.8): on the integer tile
+    grid, lines closer than one unit may be forced to touch, but never to cross properly, unless they cross.
+
+    >>> lines_cross_properly(np.array([[0, 0], [4, 4]]), np.array([[0, 4], [4, 0]]))
+    True
+    >>> lines_cross_properly(np.array([[0, 0], [4, 0]]), np.array([[2, 0], [2, 3]]))  # a T: touching only
+    False
+    """
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    if len(a) < 2 or len(b) < 2:
+        return False
+    b1, b2 = b[None, :-1], b[None, 1:]
+    bl, bh = np.minimum(b1, b2), np.maximum(b1, b2)
+    for lo in range(0, len(a) - 1, 512):  # blocks of segments of a: bounded memory on long lines
+        a1, a2 = a[lo : lo + 513][:-1, None], a[lo + 1 : lo + 513][:, None]
+        near = np.all((np.minimum(a1, a2) <= bh) & (bl <= np.maximum(a1, a2)), axis=-1)
+        if not near.any():
+            continue
+        i, j = np.nonzero(near)
+        p1, p2, q1, q2 = a1[i, 0], a2[i, 0], b1[0, j], b2[0, j]
+        proper = (_orientation(p1, p2, q1) * _orientation(p1, p2, q2) < 0) & (
+            _orientation(q1, q2, p1) * _orientation(q1, q2, p2) < 0
+        )
+        if proper.any():
+            return True
+    return False
+
+
+def proper_crossing_pairs(lines: Sequence[Coords]) -> set[tuple[int, int]]:
+    """Pairs (i, j), i < j, of lines that cross properly somewhere (:func:`lines_cross_properly`)."""
+    return {(i, j) for i, j in crossing_pairs(lines) if lines_cross_properly(lines[i], lines[j])}
