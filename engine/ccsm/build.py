@@ -150,7 +150,9 @@ def build_contour_set(
             contours.append(contour)
     model, labels = fit_scale_model(contours, params)
     workers = default_workers() if workers is None else max(1, workers)
-    chunks = [(contours[i : i + CHUNK], labels[i : i + CHUNK].tolist()) for i in range(0, len(contours), CHUNK)]
+    chunks = [
+        (contours[i : i + CHUNK], labels[i : i + CHUNK].tolist()) for i in range(0, len(contours), CHUNK)
+    ]
     results: list[CCS | BadFeature] = []
     done = 0
     total = len(contours)  # contours that passed the check; the rejected ones are reported, not built
@@ -197,7 +199,9 @@ def build_contour_set(
 REPAIR_FACTORS = (0.5, 0.25, 0.125, 0.0)
 
 
-def labels_of(contours: Sequence[Contour], labels: np.ndarray, pairs: Sequence[tuple[Contour, CCS]]) -> list[int]:
+def labels_of(
+    contours: Sequence[Contour], labels: np.ndarray, pairs: Sequence[tuple[Contour, CCS]]
+) -> list[int]:
     """Group label of each built contour."""
     index = {id(c): i for i, c in enumerate(contours)}
     return [int(labels[index[id(c)]]) for c, _ in pairs]
