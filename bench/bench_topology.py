@@ -31,7 +31,7 @@ import numpy as np
 from engine import BuildParams, build_contour_set, read_source, sample_contours_path
 from engine.baselines import simplify_at_scale
 from engine.ccsm.regression import t_for_scale
-from engine.ccsm.topology import crossing_pairs, proper_crossing_pairs
+from engine.ccsm.topology import INPUT_TOUCH_M, crossing_pairs, proper_crossing_pairs
 from engine.geom.polyline import closed_path
 from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import Renderer
@@ -75,7 +75,7 @@ def scale_table(source: Path, scales: np.ndarray) -> None:
     by_id = {c.id: c for c in contours.contours}
     ids = [s.contour_id for s in repaired.surfaces]
     inputs = [by_id[i] for i in ids]
-    met = crossing_pairs([closed_path(c.coords) if c.closed else c.coords for c in inputs])
+    met = crossing_pairs([closed_path(c.coords) if c.closed else c.coords for c in inputs], within=INPUT_TOUCH_M)
     allowed = {(ids[a], ids[b]) for a, b in met}
     print(f"\n## {source.name}: {len(ids)} contours; input pairs already meeting (left out): {len(allowed)}")
     print(f"build {built_s:.1f} s with the repair, {plain_s:.1f} s without; {repaired.repaired} got a finer target\n")
@@ -124,7 +124,7 @@ def tile_table(source: Path, smallest: float, largest: float) -> None:
         info = renderer.info("bench")[0]
         original = {c.fid: c.coords_3857 for c in simplify(renderer, "bench", 1.0, method="original").contours}
         fids = list(original)
-        allowed = {(fids[a], fids[b]) for a, b in crossing_pairs([original[f] for f in fids])}
+        allowed = {(fids[a], fids[b]) for a, b in crossing_pairs([original[f] for f in fids], within=INPUT_TOUCH_M)}
         lat = math.degrees(math.atan(math.sinh((info.bounds_3857[1] + info.bounds_3857[3]) / 2 / 6378137.0)))
         low = math.floor(float(zoom_for_scale(smallest, lat)))
         high = math.floor(float(zoom_for_scale(largest, lat)))

@@ -16,7 +16,7 @@ from threadpoolctl import threadpool_limits
 
 from engine.ccsm.ccs import CCS, build_ccs, check_contour, slice_area
 from engine.ccsm.regression import ScaleModel, fit_scale_model
-from engine.ccsm.topology import crossing_pairs, find_new_crossings
+from engine.ccsm.topology import INPUT_TOUCH_M, crossing_pairs, find_new_crossings
 from engine.errors import CCSMError
 from engine.params import BuildParams
 from engine.tolerances import MIN_VISIBLE_RING_SIDE_M, min_ring_area_for_scale
@@ -225,7 +225,7 @@ def resolve_crossings(
     before, and that neighbour then gets the same treatment.
     """
     steps = checked_ladder_steps(model)
-    allowed = crossing_pairs([s.at(0.0) for _, s in pairs])
+    allowed = crossing_pairs([s.at(0.0) for _, s in pairs], within=INPUT_TOUCH_M)
     changed: set[int] = set()
     involved = find_new_crossings([s for _, s in pairs], model.ladder, steps, allowed)
     round_ = 0

@@ -24,6 +24,11 @@ if TYPE_CHECKING:
 #: Threads for the crossing checks: GEOS releases the GIL, so the scales are checked side by side.
 CHECK_THREADS = 2
 
+#: Input lines closer than this, metres, already touch: a surface's base row reproduces L0 only to about
+#: 1e-7 m (docs/design.md section 3), so contours a few 1e-10 m apart in the input (lines of one level at a
+#: saddle) would otherwise count as "apart" and their slices' rounding-level contacts as new crossings.
+INPUT_TOUCH_M = 1e-6
+
 #: Segments per indexed piece: small boxes for the index, few enough pieces to keep the query cheap.
 PIECE_SEGMENTS = 24
 #: Segments per piece in :func:`sweep_contacts`: the exact test compares every vertex of one piece with
@@ -52,7 +57,7 @@ def _pieces(lines: Sequence[Coords]) -> tuple[NDArray[np.object_], NDArray[np.in
     return geoms, owner.astype(np.intp)
 
 
-def crossing_pairs(lines: Sequence[Coords], only: set[int] | None = None) -> set[tuple[int, int]]:
+def crossing_pairs(lines: Sequence[Coords], only: set[int] | None = None, within: float = 0.0) -> set[tuple[int, int]]:
     """Pairs (i, j), i < j, of different lines that intersect (cross or touch).
 
     Parameters
@@ -61,17 +66,20 @@ def crossing_pairs(lines: Sequence[Coords], only: set[int] | None = None) -> set
         Polylines as (n, 2) arrays (a ring as a closed path), all in one CRS.
     only
         If given, only pairs that involve one of these line indices are looked for.
+    within
+        Also count lines closer than this (metres) as meeting (``INPUT_TOUCH_M`` for the input's own touches).
     """
     geoms, owner = _pieces(lines)
     if len(geoms) == 0:
         return set()
     tree = shapely.STRtree(geoms)
     probes = np.arange(len(geoms)) if only is None else np.flatnonzero(np.isin(owner, list(only)))
-    a, b = tree.query(geoms[probes])  # box overlaps only; pieces of one line always touch, so drop those
+    boxes = geoms[probes] if within <= 0 else shapely.buffer(shapely.envelope(geoms[probes]), within)
+    a, b = tree.query(boxes)  # box overlaps only; pieces of one line always touch, so drop those
     a = probes[a]
     keep = owner[a] != owner[b]
     a, b = a[keep], b[keep]
-    hit = shapely.intersects(geoms[a], geoms[b])
+    hit = shapely.intersects(geoms[a], geoms[b]) if within <= 0 else shapely.dwithin(geoms[a], geoms[b], within)
     oa, ob = owner[a[hit]], owner[b[hit]]
     return {(int(min(x, y)), int(max(x, y))) for x, y in zip(oa.tolist(), ob.tolist(), strict=True)}
 

@@ -17,7 +17,7 @@ import pytest
 import shapely
 from synthetic_rasters import fractal_heights, write_exact_level_geojson
 
-from engine.ccsm.topology import crossing_pairs, proper_crossing_pairs
+from engine.ccsm.topology import INPUT_TOUCH_M, crossing_pairs, proper_crossing_pairs
 from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import Renderer
 from engine.serve.simplify import simplify
@@ -60,7 +60,7 @@ def input_lines(renderer: Renderer, dataset: str) -> dict[int, np.ndarray]:
 def met_in_input(renderer: Renderer, dataset: str) -> set[tuple[int, int]]:
     lines = input_lines(renderer, dataset)
     fids = list(lines)
-    return {(fids[a], fids[b]) for a, b in crossing_pairs([lines[f] for f in fids])}
+    return {(fids[a], fids[b]) for a, b in crossing_pairs([lines[f] for f in fids], within=INPUT_TOUCH_M)}
 
 
 def new_pairs(found: set[tuple[int, int]], allowed: set[tuple[int, int]]) -> set[tuple[int, int]]:
