@@ -1,53 +1,87 @@
-"""Crossings between different contours across scales: ccsm's build against per-scale simplifiers.
+"""Crossings between contours across scales: ccsm's build against per-scale simplifiers, and in served tiles.
 
-Prints, for a ladder of scales between the source and the target scale, how many pairs of different contours
-meet or cross that did not already meet in the input: ccsm as served (target at the target scale, crossing
-repair on), ccsm without the repair, and Douglas–Peucker / Visvalingam–Whyatt / Wang–Müller run at each scale
-the way per-zoom tile tools do. Rings too small for a scale are left out for every method alike.
+Prints, per source, for log-spaced scales between ``--min-scale`` and ``--max-scale``, how many pairs of
+different contours that are apart in the input touch or cross: ccsm as served (target at the target scale,
+crossing repair on), ccsm without the repair, and Douglas–Peucker / Visvalingam–Whyatt / Wang–Müller run at each
+scale the way per-zoom tile tools do. Rings too small for a scale are left out for every method alike.
 
-    python bench/bench_topology.py [SOURCE] [--scales 20]
+With ``--tiles``, the source is also built into a store and every tile of the zooms covering those scales is
+rendered at three fractional zooms: it prints the pairs apart in the input that cross *properly* on the tile
+grid, and how many of them meet in the exact slices (the rest are lines closer than the grid's rounding,
+docs/design.md section 4.8).
+
+    python bench/bench_topology.py [SOURCE ...] [--synthetic] [--scales 20] [--tiles]
+
+``--synthetic`` adds two contour sets made like GDAL's (tests/synthetic_rasters.py): lines of one level touching at
+saddles, at 10 m, and a dense 2 m interval.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
+import sys
+import tempfile
 import time
+from pathlib import Path
 
+import mapbox_vector_tile
 import numpy as np
 
 from engine import BuildParams, build_contour_set, read_source, sample_contours_path
 from engine.baselines import simplify_at_scale
 from engine.ccsm.regression import t_for_scale
-from engine.ccsm.topology import crossing_pairs
+from engine.ccsm.topology import INPUT_TOUCH_M, crossing_pairs, proper_crossing_pairs
 from engine.geom.polyline import closed_path
+from engine.serve.datasets import SourceSpec, build_dataset
+from engine.serve.renderer import Renderer
+from engine.serve.simplify import simplify
+from engine.store.sqlite import CCSStore
+from engine.tiles.grid import tiles_covering
+from engine.tiles.scale import zoom_for_scale
+from engine.types import Bounds
+
+Pair = tuple[object, object]
 
 
-def new_pairs(lines: list[np.ndarray], ids: list[object], allowed: set[tuple[object, object]]) -> int:
+def new_pairs(lines: list[np.ndarray], ids: list[object], allowed: set[Pair]) -> int:
     found = {(ids[a], ids[b]) for a, b in crossing_pairs(lines)}
     return len({p for p in found if p not in allowed and (p[1], p[0]) not in allowed})
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("source", nargs="?", default=str(sample_contours_path()))
-    parser.add_argument("--scales", type=int, default=20)
-    args = parser.parse_args()
+def synthetic_sources(folder: Path) -> list[Path]:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from synthetic_rasters import fractal_heights, write_exact_level_geojson
 
-    contours = read_source(args.source)
+    made = []
+    for name, (seed, beta, n, interval, relief) in {
+        "saddle-10m": (7, 2.5, 56, 10.0, 220.0),
+        "dense-2m": (8, 2.9, 40, 2.0, 70.0),
+    }.items():
+        z = fractal_heights(seed, beta, n=n, relief_m=relief)
+        path = folder / f"{name}.geojson"
+        made.append(write_exact_level_geojson(path, z, interval, west=10.0, north=47.0, cell_deg=1 / 1200))
+    return made
+
+
+def scale_table(source: Path, scales: np.ndarray) -> None:
+    contours = read_source(source)
     start = time.perf_counter()
     repaired = build_contour_set(contours, BuildParams())
     built_s = time.perf_counter() - start
+    start = time.perf_counter()
     plain = build_contour_set(contours, BuildParams(resolve_crossings=False))
+    plain_s = time.perf_counter() - start
     by_id = {c.id: c for c in contours.contours}
     ids = [s.contour_id for s in repaired.surfaces]
     inputs = [by_id[i] for i in ids]
-    met = crossing_pairs([closed_path(c.coords) if c.closed else c.coords for c in inputs])
+    met = crossing_pairs([closed_path(c.coords) if c.closed else c.coords for c in inputs], within=INPUT_TOUCH_M)
     allowed = {(ids[a], ids[b]) for a, b in met}
-    print(f"{len(ids)} contours; input pairs already meeting (left out): {len(allowed)}")
-    print(f"build with repair {built_s:.1f} s, {repaired.repaired} contours got a finer target\n")
+    print(f"\n## {source.name}: {len(ids)} contours; input pairs already meeting (left out): {len(allowed)}")
+    print(f"build {built_s:.1f} s with the repair, {plain_s:.1f} s without; {repaired.repaired} got a finer target\n")
     print(f"{'scale':>10} {'ccsm':>6} {'ccsm-norepair':>14} {'dp':>6} {'vw':>6} {'wm':>6}")
     totals = dict.fromkeys(("ccsm", "plain", "dp", "vw", "wm"), 0)
-    for scale in np.geomspace(repaired.model.source_scale, repaired.model.target_scale, args.scales):
+    for scale in scales:
         row = {}
         for key, built in (("ccsm", repaired), ("plain", plain)):
             visible = [s for s in built.surfaces if s.vanish_scale > scale]
@@ -63,12 +97,77 @@ def main() -> None:
             row[method] = new_pairs(lines, visible_ids, allowed)
         for key, value in row.items():
             totals[key] += value
-        print(
-            f"{scale:>10.0f} {row['ccsm']:>6} {row['plain']:>14} {row['dp']:>6} {row['vw']:>6} {row['wm']:>6}"
-        )
+        print(f"{scale:>10.0f} {row['ccsm']:>6} {row['plain']:>14} {row['dp']:>6} {row['vw']:>6} {row['wm']:>6}")
     print(
         f"{'sum':>10} {totals['ccsm']:>6} {totals['plain']:>14} {totals['dp']:>6} {totals['vw']:>6} {totals['wm']:>6}"
     )
+
+
+def tile_lines(data: bytes | None) -> tuple[list[np.ndarray], list[int]]:
+    if data is None:
+        return [], []
+    layer = mapbox_vector_tile.decode(data, default_options={"y_coord_down": True}).get("contours", {})
+    lines, fids = [], []
+    for feat in layer.get("features", []):
+        geometry = feat["geometry"]
+        parts = [geometry["coordinates"]] if geometry["type"] == "LineString" else geometry["coordinates"]
+        lines += [np.asarray(p, dtype=float) for p in parts]
+        fids += [feat["id"]] * len(parts)
+    return lines, fids
+
+
+def tile_table(source: Path, smallest: float, largest: float) -> None:
+    with tempfile.TemporaryDirectory() as folder:
+        store = CCSStore(Path(folder) / "bench.sqlite")
+        build_dataset(store, SourceSpec(source, "bench", "bench"))
+        renderer = Renderer(store)
+        info = renderer.info("bench")[0]
+        original = {c.fid: c.coords_3857 for c in simplify(renderer, "bench", 1.0, method="original").contours}
+        fids = list(original)
+        allowed = {(fids[a], fids[b]) for a, b in crossing_pairs([original[f] for f in fids], within=INPUT_TOUCH_M)}
+        lat = math.degrees(math.atan(math.sinh((info.bounds_3857[1] + info.bounds_3857[3]) / 2 / 6378137.0)))
+        low = math.floor(float(zoom_for_scale(smallest, lat)))
+        high = math.floor(float(zoom_for_scale(largest, lat)))
+        print(f"\n{source.name}: tiles (zooms z, z+0.3, z+0.7), pairs apart in the input crossing properly")
+        print(f"{'zoom':>5} {'tiles':>6} {'crossing':>9} {'exact-meet':>11}")
+        for z in range(low, high + 1):
+            tiles = crossing = exact = 0
+            for zoom in (z, z + 0.3, z + 0.7):
+                for tile in tiles_covering(Bounds(*info.bounds_3857), z):
+                    lines, owner = tile_lines(renderer.tile("bench", *tile, zoom=zoom).data)
+                    tiles += 1
+                    pairs = {
+                        (min(owner[a], owner[b]), max(owner[a], owner[b])) for a, b in proper_crossing_pairs(lines)
+                    }
+                    pairs = {p for p in pairs if p[0] != p[1] and p not in allowed and (p[1], p[0]) not in allowed}
+                    crossing += len(pairs)
+                    if pairs:
+                        drawn = {
+                            c.fid: c.coords_3857
+                            for c in simplify(renderer, "bench", renderer.scale_of_tile(tile, zoom)).contours
+                        }
+                        exact += sum(1 for a, b in pairs if crossing_pairs([drawn[a], drawn[b]]))
+            print(f"{z:>5} {tiles:>6} {crossing:>9} {exact:>11}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("sources", nargs="*", type=Path)
+    parser.add_argument("--synthetic", action="store_true", help="add GDAL-style saddle and dense 2 m data")
+    parser.add_argument("--scales", type=int, default=20)
+    parser.add_argument("--min-scale", type=float, default=50_000.0, help="largest scale's denominator")
+    parser.add_argument("--max-scale", type=float, default=500_000.0, help="smallest scale's denominator")
+    parser.add_argument("--tiles", action="store_true", help="also count proper crossings in the tiles")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as folder:
+        sources = list(args.sources) or ([] if args.synthetic else [sample_contours_path()])
+        if args.synthetic:
+            sources += synthetic_sources(Path(folder))
+        scales = np.geomspace(args.min_scale, args.max_scale, args.scales)
+        for source in sources:
+            scale_table(Path(source), scales)
+            if args.tiles:
+                tile_table(Path(source), args.max_scale, args.min_scale)
 
 
 if __name__ == "__main__":

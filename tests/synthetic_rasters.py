@@ -52,3 +52,49 @@ def fractal_heights(seed: int, beta: float, n: int = 128, relief_m: float = 400.
     spectrum[0, 0] = 0.0
     z = np.fft.irfft2(spectrum, s=(n, n))
     return np.round(200.0 + (z - z.min()) / np.ptp(z) * relief_m)
+
+
+def exact_level_contours(z: np.ndarray, interval: float) -> list[tuple[float, np.ndarray, bool]]:
+    """Contour an integer DEM the way GDAL's ``gdal_contour`` does: at the levels themselves, no offset.
+
+    Cells exactly at a level put contour vertices on grid nodes, so where two lines of one level meet at a
+    saddle node they share that vertex and touch, as GDAL's output does. Returns (level, (n, 2) points in
+    (column, row) grid units, closed) per line; a ring is given without its repeated last point.
+    """
+    import contourpy
+
+    generator = contourpy.contour_generator(z=z, name="serial", line_type=contourpy.LineType.Separate)
+    lines = []
+    for level in np.arange(np.ceil(z.min() / interval), np.floor(z.max() / interval) + 1) * interval:
+        for xy in generator.lines(float(level)):
+            closed = len(xy) > 3 and bool(np.all(xy[0] == xy[-1]))
+            pts = xy[:-1] if closed else xy
+            keep = np.concatenate([[True], np.any(np.diff(pts, axis=0) != 0, axis=1)])  # no repeated vertices
+            pts = pts[keep]
+            if len(pts) >= (3 if closed else 2):
+                lines.append((float(level), pts, closed))
+    return lines
+
+
+def write_exact_level_geojson(
+    path: Path, z: np.ndarray, interval: float, *, west: float, north: float, cell_deg: float
+) -> Path:
+    """Contours of ``z`` at exact levels (:func:`exact_level_contours`) as a GeoJSON file in lon/lat, with
+    ``ele``: data like GDAL's, with lines of one level touching at saddles."""
+    import json
+
+    features = []
+    for k, (level, pts, closed) in enumerate(exact_level_contours(z, interval)):
+        lonlat = np.column_stack([west + pts[:, 0] * cell_deg, north - pts[:, 1] * cell_deg])
+        if closed:
+            lonlat = np.vstack([lonlat, lonlat[:1]])
+        features.append(
+            {
+                "type": "Feature",
+                "id": k,
+                "properties": {"ele": level},
+                "geometry": {"type": "LineString", "coordinates": lonlat.tolist()},
+            }
+        )
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": features}))
+    return path

@@ -17,7 +17,7 @@ from threadpoolctl import threadpool_limits
 
 from engine.ccsm.ccs import CCS, build_ccs, check_contour, slice_area
 from engine.ccsm.regression import ScaleModel, fit_scale_model
-from engine.ccsm.topology import crossing_pairs, find_new_crossings
+from engine.ccsm.topology import INPUT_TOUCH_M, crossing_pairs, find_new_crossings
 from engine.errors import CCSMError
 from engine.parallel import local_pool
 from engine.params import BuildParams
@@ -197,10 +197,9 @@ def build_contour_set(
     )
 
 
-#: Rounds of crossing repair; each halves the target tolerance of the contours involved, the last keeps L0.
+#: Rounds of crossing repair; each halves the target tolerance of the contours involved, the last keeps L0
+#: (Ln = L0: the contour no longer moves, so two such contours are as apart as in the input).
 REPAIR_FACTORS = (0.5, 0.25, 0.125, 0.0)
-#: Every how many ladder scales the slices are checked for crossings.
-CHECK_EVERY = 4
 
 
 def labels_of(
@@ -212,34 +211,38 @@ def labels_of(
 
 
 def checked_ladder_steps(model: ScaleModel) -> list[int]:
-    """Ladder indices at which slices are checked for crossings (every CHECK_EVERY-th, and the target)."""
-    steps = list(range(CHECK_EVERY, len(model.ladder), CHECK_EVERY))
-    if steps[-1:] != [len(model.ladder) - 1]:
-        steps.append(len(model.ladder) - 1)
-    return steps
+    """Steps (ladder[k], ladder[k + 1]) checked for crossings: every one, so every scale from source to
+    target is covered (docs/design.md section 4.8); beyond the target every slice is the target's."""
+    return list(range(len(model.ladder) - 1))
 
 
 def resolve_crossings(
     pairs: list[tuple[Contour, CCS]], labels: Sequence[int], params: BuildParams, model: ScaleModel
 ) -> int:
-    """Rebuild, with finer targets, the contours whose slices cross a neighbour; returns how many changed.
+    """Rebuild, with finer targets, the contours whose slices meet a neighbour at some scale; returns how
+    many changed.
 
     Pairs of contours that already touch in the input are left alone: generalization cannot separate
-    them and must not be blamed for them.
+    them and must not be blamed for them. Rounds go on until no new contact is left: a contour rebuilt in
+    the last round (Ln = L0, it no longer moves) can still be met by a neighbour that was not involved
+    before, and that neighbour then gets the same treatment.
     """
     steps = checked_ladder_steps(model)
-    allowed = crossing_pairs([s.at(0.0) for _, s in pairs])
+    allowed = crossing_pairs([s.at(0.0) for _, s in pairs], within=INPUT_TOUCH_M)
     changed: set[int] = set()
     involved = find_new_crossings([s for _, s in pairs], model.ladder, steps, allowed)
-    for factor in REPAIR_FACTORS:
-        if not involved:
-            break
+    round_ = 0
+    while involved:
+        factor = REPAIR_FACTORS[min(round_, len(REPAIR_FACTORS) - 1)]
+        round_ += 1
         rebuilt_now: set[int] = set()
         for i in sorted(involved):
             contour, old = pairs[i]
-            if old.tolerance_factor <= factor:
+            # Never coarser than before, and at least one step finer than its last build.
+            new_factor = min(factor, _next_factor(old.tolerance_factor))
+            if old.tolerance_factor <= new_factor:
                 continue
-            rebuilt = _build_chunk([contour], [labels[i]], params, model, [factor])[0]
+            rebuilt = _build_chunk([contour], [labels[i]], params, model, [new_factor])[0]
             if isinstance(rebuilt, CCS):
                 pairs[i] = (contour, rebuilt)
                 changed.add(i)
@@ -251,6 +254,11 @@ def resolve_crossings(
             else set()
         )
     return len(changed)
+
+
+def _next_factor(factor: float) -> float:
+    """The first repair factor below ``factor`` (0 once the factors run out)."""
+    return next((f for f in REPAIR_FACTORS if f < factor), 0.0)
 
 
 def t_for_scale_all(built: BuiltSet, scale: float) -> np.ndarray:

@@ -8,12 +8,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 import shapely
 from numpy.typing import NDArray
 
+from engine.ccsm.sweep import pieces_meet
 from engine.types import Coords
 
 if TYPE_CHECKING:
@@ -22,8 +24,16 @@ if TYPE_CHECKING:
 #: Threads for the crossing checks: GEOS releases the GIL, so the scales are checked side by side.
 CHECK_THREADS = 2
 
+#: Input lines closer than this, metres, already touch: a surface's base row reproduces L0 only to about
+#: 1e-7 m (docs/design.md section 3), so contours a few 1e-10 m apart in the input (lines of one level at a
+#: saddle) would otherwise count as "apart" and their slices' rounding-level contacts as new crossings.
+INPUT_TOUCH_M = 1e-6
+
 #: Segments per indexed piece: small boxes for the index, few enough pieces to keep the query cheap.
 PIECE_SEGMENTS = 24
+#: Segments per piece in :func:`sweep_contacts`: the exact test compares every vertex of one piece with
+#: every segment of the other, so its pieces are shorter (12 was fastest on the sample, against 6 and 24).
+SWEEP_PIECE_SEGMENTS = 12
 
 
 def _pieces(lines: Sequence[Coords]) -> tuple[NDArray[np.object_], NDArray[np.intp]]:
@@ -47,7 +57,7 @@ def _pieces(lines: Sequence[Coords]) -> tuple[NDArray[np.object_], NDArray[np.in
     return geoms, owner.astype(np.intp)
 
 
-def crossing_pairs(lines: Sequence[Coords], only: set[int] | None = None) -> set[tuple[int, int]]:
+def crossing_pairs(lines: Sequence[Coords], only: set[int] | None = None, within: float = 0.0) -> set[tuple[int, int]]:
     """Pairs (i, j), i < j, of different lines that intersect (cross or touch).
 
     Parameters
@@ -56,27 +66,151 @@ def crossing_pairs(lines: Sequence[Coords], only: set[int] | None = None) -> set
         Polylines as (n, 2) arrays (a ring as a closed path), all in one CRS.
     only
         If given, only pairs that involve one of these line indices are looked for.
+    within
+        Also count lines closer than this (metres) as meeting (``INPUT_TOUCH_M`` for the input's own touches).
     """
     geoms, owner = _pieces(lines)
     if len(geoms) == 0:
         return set()
     tree = shapely.STRtree(geoms)
     probes = np.arange(len(geoms)) if only is None else np.flatnonzero(np.isin(owner, list(only)))
-    a, b = tree.query(geoms[probes])  # box overlaps only; pieces of one line always touch, so drop those
+    boxes = geoms[probes] if within <= 0 else shapely.buffer(shapely.envelope(geoms[probes]), within)
+    a, b = tree.query(boxes)  # box overlaps only; pieces of one line always touch, so drop those
     a = probes[a]
     keep = owner[a] != owner[b]
     a, b = a[keep], b[keep]
-    hit = shapely.intersects(geoms[a], geoms[b])
+    hit = shapely.intersects(geoms[a], geoms[b]) if within <= 0 else shapely.dwithin(geoms[a], geoms[b], within)
     oa, ob = owner[a[hit]], owner[b[hit]]
     return {(int(min(x, y)), int(max(x, y))) for x, y in zip(oa.tolist(), ob.tolist(), strict=True)}
 
 
-def neighbours(surfaces: Sequence[CCS], of: set[int]) -> NDArray[np.intp]:
-    """Indices of the surfaces whose extent (over every t) overlaps that of one of ``of``, those included."""
-    boxes = shapely.box(*np.array([s.bounds for s in surfaces]).T)
-    tree = shapely.STRtree(boxes)
-    _, hits = tree.query(boxes[sorted(of)])
-    return np.unique(np.concatenate([hits, np.array(sorted(of), dtype=np.intp)]))
+def _piece_ranges(lines: Sequence[Coords], size: int) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]:
+    """Pieces of at most ``size`` segments of the lines concatenated: first and last point, owner."""
+    sizes = np.array([len(line) for line in lines], dtype=np.intp)
+    offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
+    usable = np.flatnonzero(sizes >= 2)
+    n, off = sizes[usable], offsets[usable]
+    per_line = (n - 2) // size + 1
+    owner = np.repeat(usable, per_line)
+    k = np.arange(per_line.sum()) - np.repeat(np.cumsum(per_line) - per_line, per_line)
+    first = np.repeat(off, per_line) + k * size
+    last = np.minimum(first + size, np.repeat(off + n - 1, per_line))
+    return first.astype(np.intp), last.astype(np.intp), owner.astype(np.intp)
+
+
+@dataclass(frozen=True)
+class SweepIndex:
+    """Lines whose vertices each move on a straight path, cut into pieces, and the pairs of pieces of
+    different lines whose paths' boxes overlap: the only pairs that can ever meet.
+
+    Built once for a set of CCS (``base`` and ``top`` rows: a slice at any t lies between them, vertex by
+    vertex), it answers for any two t per line (:meth:`contacts`) with no new spatial index.
+
+    Attributes
+    ----------
+    base, top
+        (N, 2) float64 points of all lines concatenated, at t = 0 and t = 1 (metres).
+    line_of_point
+        (N,) index of the line each point belongs to.
+    first, last, owner
+        (P,) first and last point of each piece, and its line.
+    p, q
+        (K,) candidate pairs of pieces, each pair once.
+    """
+
+    base: NDArray[np.float64]
+    top: NDArray[np.float64]
+    line_of_point: NDArray[np.intp]
+    first: NDArray[np.intp]
+    last: NDArray[np.intp]
+    owner: NDArray[np.intp]
+    p: NDArray[np.intp]
+    q: NDArray[np.intp]
+
+    @classmethod
+    def of(cls, bases: Sequence[Coords], tops: Sequence[Coords], only: set[int] | None = None) -> SweepIndex:
+        """Index lines given by their rows at t = 0 and t = 1; with ``only``, keep just the pairs of pieces
+        that involve one of these line indices."""
+        first, last, owner = _piece_ranges(bases, SWEEP_PIECE_SEGMENTS)
+        sizes = np.array([len(line) for line in bases], dtype=np.intp)
+        base = _stacked(bases)
+        top = _stacked(tops)
+        line_of_point = np.repeat(np.arange(len(bases)), sizes).astype(np.intp)
+        if len(first) == 0:
+            empty = np.zeros(0, dtype=np.intp)
+            return cls(base, top, line_of_point, first, last, owner, empty, empty)
+        # Every slice of a piece, at any t, stays inside the box of its rows at t = 0 and t = 1.
+        lo = _per_piece(np.minimum, np.minimum(base, top), first, last)
+        hi = _per_piece(np.maximum, np.maximum(base, top), first, last)
+        boxes = shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1])
+        probes = np.arange(len(boxes)) if only is None else np.flatnonzero(np.isin(owner, list(only)))
+        p, q = shapely.STRtree(boxes).query(boxes[probes])
+        p = probes[p]
+        # Each pair of pieces once: a probed piece meets a piece of a line that is not probed from its side only.
+        keep = owner[p] < owner[q]
+        if only is not None:
+            keep |= (owner[p] != owner[q]) & ~np.isin(owner[q], list(only))
+        return cls(base, top, line_of_point, first, last, owner, p[keep], q[keep])
+
+    def contacts(
+        self, t0: NDArray[np.float64], t1: NDArray[np.float64], shown: NDArray[np.bool_] | None = None
+    ) -> set[tuple[int, int]]:
+        """Pairs (i, j), i < j, of lines that meet while each line i goes from its slice at ``t0[i]`` to its
+        slice at ``t1[i]``, all at one pace (``engine.ccsm.sweep``); lines not ``shown`` are left out."""
+        tp0 = t0[self.line_of_point][:, None]
+        tp1 = t1[self.line_of_point][:, None]
+        a = self.base + tp0 * (self.top - self.base)
+        b = self.base + tp1 * (self.top - self.base)
+        p, q = self.p, self.q
+        if shown is not None:
+            both = shown[self.owner[p]] & shown[self.owner[q]]
+            p, q = p[both], q[both]
+        # Pieces whose boxes over this motion miss each other cannot meet: most pairs end here.
+        lo = _per_piece(np.minimum, np.minimum(a, b), self.first, self.last)
+        hi = _per_piece(np.maximum, np.maximum(a, b), self.first, self.last)
+        near = np.all((lo[p] <= hi[q]) & (lo[q] <= hi[p]), axis=1)
+        p, q = p[near], q[near]
+        hit = pieces_meet(a, b, self.first, self.last, p, q)
+        op, oq = self.owner[p[hit]], self.owner[q[hit]]
+        return {(int(min(x, y)), int(max(x, y))) for x, y in zip(op.tolist(), oq.tolist(), strict=True)}
+
+
+def sweep_contacts(
+    start: Sequence[Coords], end: Sequence[Coords], only: set[int] | None = None
+) -> set[tuple[int, int]]:
+    """Pairs (i, j), i < j, of lines that meet at some moment while every vertex moves straight, at one
+    pace, from its place in ``start`` to its place in ``end`` (``engine.ccsm.sweep``).
+
+    Parameters
+    ----------
+    start, end
+        The lines at both ends of the motion, (n_i, 2) arrays in one metric CRS; ``end[i]`` has the
+        vertices of ``start[i]``.
+    only
+        If given, only pairs that involve one of these line indices are looked for.
+
+    >>> a = np.array([[0.0, 0.0], [10.0, 0.0]])
+    >>> b0, b1 = np.array([[5.0, 5.0], [5.0, 9.0]]), np.array([[5.0, -5.0], [5.0, -1.0]])
+    >>> sweep_contacts([a, b0], [a, b1])  # b passes through a on its way down, and is apart at both ends
+    {(0, 1)}
+    """
+    n = len(start)
+    return SweepIndex.of(start, end, only).contacts(np.zeros(n), np.ones(n))
+
+
+def _stacked(lines: Sequence[Coords]) -> NDArray[np.float64]:
+    """The lines' points concatenated, (N, 2) float64."""
+    if not len(lines):
+        return np.zeros((0, 2))
+    return np.concatenate([np.asarray(line, dtype=np.float64) for line in lines])
+
+
+def _per_piece(
+    ufunc: np.ufunc, values: NDArray[np.float64], first: NDArray[np.intp], last: NDArray[np.intp]
+) -> NDArray[np.float64]:
+    """``ufunc`` (np.minimum or np.maximum) of ``values`` over each piece's points first..last."""
+    # reduceat runs up to the next piece's first point; a piece of the same line starts at this one's last.
+    return np.asarray(ufunc(ufunc.reduceat(values, first, axis=0), values[last]))
 
 
 def find_new_crossings(
@@ -86,35 +220,80 @@ def find_new_crossings(
     allowed: set[tuple[int, int]],
     only: set[int] | None = None,
 ) -> set[int]:
-    """Indices of surfaces whose slice crosses another visible slice at a checked scale, beyond ``allowed``.
+    """Indices of surfaces whose slice meets another visible slice at any scale from ``ladder[k]`` to
+    ``ladder[k + 1]`` for k in ``steps``, beyond ``allowed``.
+
+    Between two neighbouring ladder scales each slice's vertices move straight at one pace
+    (docs/design.md section 4.8), so :class:`SweepIndex` covers every scale of the step, not a sample.
+    The rings visible at ``ladder[k]`` are checked over the whole step (a ring only vanishes as the scale
+    grows, so this is every ring shown in it).
 
     Parameters
     ----------
     surfaces
         Every CCS of the set, each with its ``t_at_scale`` table on ``ladder``.
     ladder, steps
-        The scale ladder and the indices of it to check.
+        The scale ladder and the indices k of the steps (ladder[k], ladder[k + 1]) to check.
     allowed
         Pairs (i, j), i < j, that already meet in the input.
     only
-        Restrict the search to crossings that involve these surfaces (the ones just rebuilt) and their
-        neighbours.
+        Restrict the search to crossings that involve these surfaces (the ones just rebuilt).
     """
-    candidates = np.arange(len(surfaces)) if only is None else neighbours(surfaces, only)
-    vanish = np.array([surfaces[i].vanish_scale for i in candidates])
+    index = SweepIndex.of([s.base for s in surfaces], [s.top for s in surfaces], only)
+    tables = np.array([s.t_at_scale for s in surfaces]).reshape(len(surfaces), -1)
+    vanish = np.array([s.vanish_scale for s in surfaces])
 
     def check(k: int) -> set[int]:
-        visible = candidates[vanish > ladder[k]]
-        local_only = None if only is None else {int(j) for j in np.flatnonzero(np.isin(visible, list(only)))}
-        if local_only is not None and not local_only:
-            return set()
-        lines = [surfaces[i].at(float(surfaces[i].t_at_scale[k])) for i in visible]
         found: set[int] = set()
-        for a, b in crossing_pairs(lines, local_only):
-            pair = (int(visible[a]), int(visible[b]))
+        for pair in index.contacts(tables[:, k], tables[:, k + 1], vanish > ladder[k]):
             if pair not in allowed:
                 found.update(pair)
         return found
 
     with ThreadPoolExecutor(max_workers=CHECK_THREADS) as pool:
         return set().union(*pool.map(check, steps))
+
+
+def _orientation(a: NDArray[np.float64], b: NDArray[np.float64], c: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Sign of the turn a -> b -> c for broadcast (..., 2) points: > 0 left, < 0 right, 0 on one line."""
+    return np.sign(
+        (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0])
+    )
+
+
+def lines_cross_properly(a: Coords, b: Coords) -> bool:
+    """Whether a segment of ``a`` and a segment of ``b`` cross at a point inside both (a *proper* crossing).
+
+    Touching (a vertex on the other line, shared vertices, overlapping collinear pieces) is not a proper
+    crossing. This is the test for quantised tile geometry (docs/design.md section 4.8): on the integer tile
+    grid, lines closer than one unit may be forced to touch, but never to cross properly, unless they cross.
+
+    >>> lines_cross_properly(np.array([[0, 0], [4, 4]]), np.array([[0, 4], [4, 0]]))
+    True
+    >>> lines_cross_properly(np.array([[0, 0], [4, 0]]), np.array([[2, 0], [2, 3]]))  # a T: touching only
+    False
+    """
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    if len(a) < 2 or len(b) < 2:
+        return False
+    b1, b2 = b[None, :-1], b[None, 1:]
+    bl, bh = np.minimum(b1, b2), np.maximum(b1, b2)
+    for lo in range(0, len(a) - 1, 512):  # blocks of segments of a: bounded memory on long lines
+        a1, a2 = a[lo : lo + 513][:-1, None], a[lo + 1 : lo + 513][:, None]
+        near = np.all((np.minimum(a1, a2) <= bh) & (bl <= np.maximum(a1, a2)), axis=-1)
+        if not near.any():
+            continue
+        i, j = np.nonzero(near)
+        p1, p2, q1, q2 = a1[i, 0], a2[i, 0], b1[0, j], b2[0, j]
+        proper = (_orientation(p1, p2, q1) * _orientation(p1, p2, q2) < 0) & (
+            _orientation(q1, q2, p1) * _orientation(q1, q2, p2) < 0
+        )
+        if proper.any():
+            return True
+    return False
+
+
+def proper_crossing_pairs(lines: Sequence[Coords]) -> set[tuple[int, int]]:
+    """Pairs (i, j), i < j, of lines that cross properly somewhere (:func:`lines_cross_properly`)."""
+    return {(i, j) for i, j in crossing_pairs(lines) if lines_cross_properly(lines[i], lines[j])}

@@ -2,10 +2,11 @@
 
 import numpy as np
 import pytest
+import shapely
 
 from engine.ccsm.build import build_contour_set
 from engine.ccsm.regression import t_for_scale
-from engine.ccsm.topology import crossing_pairs
+from engine.ccsm.topology import crossing_pairs, sweep_contacts
 from engine.params import BuildParams
 from engine.types import Contour, ContourSet
 
@@ -66,3 +67,45 @@ def test_repair_leaves_no_crossing_at_any_scale(rings: ContourSet) -> None:
     assert built.repaired > 0
     assert crossings_over_scales(built) == 0
     assert all(0.0 <= s.tolerance_factor <= 1.0 for s in built.surfaces)
+
+
+def moving_zigzags(seed: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Eight zigzag lines 3 m apart whose vertices each move up to 4 m on a straight path."""
+    rng = np.random.default_rng(seed)
+    x = np.linspace(0.0, 60.0, 13)
+    start = [np.column_stack([x, 3.0 * k + rng.uniform(-0.8, 0.8, len(x))]) for k in range(8)]
+    end = [line + rng.uniform(-2.0, 2.0, line.shape) for line in start]
+    return start, end
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_sweep_contacts_agree_with_a_dense_sampling_of_the_motion(seed: int) -> None:
+    start, end = moving_zigzags(seed)
+    found = sweep_contacts(start, end)
+    lams = np.linspace(0.0, 1.0, 4001)
+    # Between two samples no point moves more than this: a contact lies that close to a sample's lines.
+    step = max(float(np.hypot(*(b - a).T).max()) for a, b in zip(start, end, strict=True)) / 4000
+    coords = np.array([[a + lam * (b - a) for a, b in zip(start, end, strict=True)] for lam in lams])
+    lines = shapely.linestrings(coords.reshape(-1, 2), indices=np.repeat(np.arange(coords.shape[0] * 8), 13))
+    lines = lines.reshape(len(lams), 8)
+    i, j = np.triu_indices(8, 1)
+    hit = shapely.intersects(lines[:, i], lines[:, j]).any(axis=0)
+    close = (shapely.distance(lines[:, i], lines[:, j]) <= step).any(axis=0)
+    met = {(int(a), int(b)) for a, b in zip(i[hit], j[hit], strict=True)}
+    near = {(int(a), int(b)) for a, b in zip(i[close], j[close], strict=True)}
+    assert met <= found  # every contact the sampling sees is found
+    assert found <= near  # and every contact found is real
+    assert met  # the motions do make lines meet
+
+
+def test_sweep_contacts_find_touching_and_passing_through() -> None:
+    line = np.array([[0.0, 0.0], [10.0, 0.0]])
+    v_start = np.array([[5.0, 4.0], [6.0, 8.0], [7.0, 4.0]])
+    still = v_start + [3.0, 0.0]  # slides sideways, never down
+    assert sweep_contacts([line, v_start], [line, still]) == set()
+    grazing = v_start + [0.0, -4.0]  # its lowest vertices come down exactly onto the line
+    assert sweep_contacts([line, v_start], [line, grazing]) == {(0, 1)}
+    through = v_start.copy()
+    through[:, 1] -= 12.0  # the whole line moves down through `line`, apart at both ends
+    assert sweep_contacts([line, v_start], [line, through]) == {(0, 1)}
+    assert not crossing_pairs([line, v_start]) and not crossing_pairs([line, through])
