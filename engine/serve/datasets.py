@@ -11,10 +11,12 @@ import json
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from engine.cartography.options import PARAMS_KEY, CartographyOptions
+from engine.cartography.units import source_units
 from engine.ccsm.build import BuiltSet, build_contour_set
 from engine.io.source import read_source
 from engine.params import BuildParams
@@ -57,6 +59,9 @@ class SourceSpec:
         Passed to ``read_source`` (a DEM needs ``interval``).
     source_scale, target_scale
         Scale denominators of t = 0 and t = 1.
+    cartography
+        Units, index contours, attribute names and schedule override (docs/design.md section 9); None for the
+        defaults (units then as the source states them, else metres).
     """
 
     path: Path
@@ -66,15 +71,28 @@ class SourceSpec:
     interval: float | None = None
     source_scale: float = 50_000.0
     target_scale: float = 500_000.0
+    cartography: CartographyOptions | None = None
 
     def params(self) -> dict[str, Any]:
         """The parameters that decide the build (part of the content hash)."""
-        return {
+        params: dict[str, Any] = {
             "elevation_field": self.elevation_field,
             "interval": self.interval,
             "source_scale": self.source_scale,
             "target_scale": self.target_scale,
         }
+        if self.cartography is not None:
+            params[PARAMS_KEY] = self.cartography.checked().as_params()
+        return params
+
+    def stored_params(self) -> dict[str, Any]:
+        """The parameters as stored with the dataset: :meth:`params` with the vertical unit resolved (given,
+        else as the source states it, else metres)."""
+        options = (self.cartography or CartographyOptions()).checked()
+        if options.units is None:
+            units = source_units(self.path, self.elevation_field) or "m"
+            options = replace(options, units=units)
+        return {**self.params(), PARAMS_KEY: options.as_params()}
 
 
 def slugify(text: str) -> str:
@@ -184,6 +202,7 @@ def build_dataset(
     if not force and store.source_hash_of(spec.dataset) == digest:
         return store.dataset(spec.dataset), False
     BuildParams(source_scale=spec.source_scale, target_scale=spec.target_scale)  # bad scales fail before reading
+    params = spec.stored_params()  # bad cartography options fail before reading too
     contour_set = read_source(spec.path, elevation_field=spec.elevation_field, interval=spec.interval)
     info = build_and_save(
         store,
@@ -192,7 +211,7 @@ def build_dataset(
         name=spec.name,
         source=spec.path.name,
         digest=digest,
-        params=spec.params(),
+        params=params,
         workers=workers,
         progress=progress,
     )
