@@ -45,6 +45,7 @@ def specs_from_settings(settings: Settings) -> list[SourceSpec]:
         "interval": settings.interval,
         "source_scale": settings.source_scale,
         "target_scale": settings.target_scale,
+        "cartography": settings.cartography,
     }
     if settings.sources:
         specs = []

@@ -133,14 +133,15 @@ def _t_through_zooms(
 
 
 def _straightness(line: NDArray[np.float64], width: float) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-    """Per row: chord / arc of the line over ``width`` metres of it centred at the row, and whether the window
-    lies wholly on the line."""
+    """Per row: chord / arc of the line over ``width`` metres of it centred at the row (the window's ends
+    interpolated along the line), and whether the window lies wholly on the line."""
     s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(line, axis=0).T))])
-    lo = np.searchsorted(s, s - width / 2, side="left")
-    hi = np.searchsorted(s, s + width / 2, side="right") - 1
-    inside = (s - width / 2 >= 0) & (s + width / 2 <= s[-1]) & (hi > lo)
-    chord = np.hypot(*(line[hi] - line[lo]).T)
-    return chord / np.maximum(s[hi] - s[lo], 1e-9), inside
+    inside = (s - width / 2 >= 0) & (s + width / 2 <= s[-1])
+    a = np.clip(s - width / 2, 0.0, s[-1])
+    b = np.clip(s + width / 2, 0.0, s[-1])
+    pa = np.column_stack([np.interp(a, s, line[:, 0]), np.interp(a, s, line[:, 1])])
+    pb = np.column_stack([np.interp(b, s, line[:, 0]), np.interp(b, s, line[:, 1])])
+    return np.hypot(*(pb - pa).T) / np.maximum(b - a, 1e-9), inside
 
 
 def contour_candidates(
@@ -187,11 +188,10 @@ def contour_candidates(
             chosen.append(j)
     pick = np.array(sorted(chosen), dtype=np.intp)
     rows = cand[pick]
-    width = label_px * metres_per_px(first[pick])
-    lo = np.searchsorted(s, s[rows] - width / 2, side="left")
-    hi = np.minimum(np.searchsorted(s, s[rows] + width / 2, side="right") - 1, len(base) - 1)
-    chord = base[hi] - base[lo]
-    return base[rows], upright_angle(chord[:, 0], chord[:, 1]), score[pick], first[pick]
+    half = label_px * metres_per_px(first[pick]) / 2
+    ends = [np.clip(s[rows] + sign * half, 0.0, s[-1]) for sign in (-1.0, 1.0)]
+    dx, dy = (np.interp(ends[1], s, base[:, i]) - np.interp(ends[0], s, base[:, i]) for i in (0, 1))
+    return base[rows], upright_angle(dx, dy), score[pick], first[pick]
 
 
 def box_px(text_len: NDArray[np.int64], angle_deg: NDArray[np.float64], style: LabelStyle) -> NDArray[np.float64]:
