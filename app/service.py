@@ -16,7 +16,7 @@ import time
 import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +24,8 @@ import numpy as np
 
 from app.errors import DatasetExists, MalformedUpload, public_message
 from app.settings import Settings
+from engine.cartography.options import PARAMS_KEY as CARTOGRAPHY_KEY
+from engine.cartography.options import CartographyOptions
 from engine.errors import CCSMError, StoreNotReady, UnknownLayer
 from engine.serve.datasets import SourceSpec, build_and_save, build_dataset, slugify, source_hash
 from engine.serve.renderer import Renderer, TileOptions
@@ -184,12 +186,16 @@ class DatasetService:
         interval: float | None,
         source_scale: float,
         target_scale: float,
+        cartography: CartographyOptions | None = None,
     ) -> tuple[Upload, Any]:
-        """Check an uploaded GeoJSON and read its contours (raises MalformedUpload, SourceError, ...)."""
+        """Check an uploaded GeoJSON and read its contours (raises MalformedUpload, SourceError,
+        InvalidParameter for bad cartography options, ...)."""
         from engine.io.source import read_source
+        from engine.io.vector import elevation_units
         from engine.params import BuildParams
 
         BuildParams(source_scale=source_scale, target_scale=target_scale)  # validates the scales
+        options = (cartography or CartographyOptions()).checked()
         try:
             doc = json.loads(body)
         except (UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -200,12 +206,14 @@ class DatasetService:
             )
         if doc["type"] == "FeatureCollection" and not isinstance(doc.get("features"), list):
             raise MalformedUpload("a FeatureCollection needs a 'features' array")
-        params = {
+        params: dict[str, Any] = {
             "elevation_field": elevation_field,
             "interval": interval,
             "source_scale": source_scale,
             "target_scale": target_scale,
         }
+        if options != CartographyOptions():
+            params[CARTOGRAPHY_KEY] = options.as_params()
         digest = source_hash(None, params, data=body)
         if not dataset:
             ident = self._free_id(slugify(name) if name else f"upload-{digest[:10]}")
@@ -220,9 +228,11 @@ class DatasetService:
         path.write_bytes(body)
         try:
             contour_set = read_source(path, elevation_field=elevation_field, interval=interval)
+            units = options.units or elevation_units(path, elevation_field) or "m"
         except BaseException:
             path.unlink(missing_ok=True)
             raise
+        params[CARTOGRAPHY_KEY] = replace(options, units=units).as_params()  # stored, not hashed
         return Upload(ident, name or ident, path, digest, params), contour_set
 
     def _taken(self, ident: str) -> bool:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Depends, Path, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
@@ -12,6 +12,7 @@ from app.dependencies import get_service, get_settings
 from app.errors import UploadTooLarge
 from app.service import DatasetService
 from app.settings import Settings
+from engine.cartography.options import CartographyOptions
 
 router = APIRouter(tags=["datasets"])
 
@@ -94,6 +95,22 @@ async def upload_dataset(
     target_scale: Annotated[
         float | None, Query(description="Scale denominator of t = 1.", gt=0, le=1e10, allow_inf_nan=False)
     ] = None,
+    units: Annotated[
+        Literal["m", "ft"] | None,
+        Query(description="Vertical unit (default: as the elevation property's name states it, else m)."),
+    ] = None,
+    index_every: Annotated[int, Query(description="Index contours are every n-th interval.", ge=2, le=100)] = 5,
+    attribute_names: Annotated[
+        Literal["ccsm", "maplibre-contour"], Query(description="Tile attribute names (maplibre-contour: `ele`).")
+    ] = "ccsm",
+    schedule: Annotated[
+        str | None,
+        Query(description="Interval schedule override STEP:HIDE_SCALE,...,STEP (docs/design.md section 9).",
+              max_length=500),
+    ] = None,
+    attribution: Annotated[
+        str | None, Query(description="Who made the data, for TileJSON.", max_length=500)
+    ] = None,
 ) -> JSONResponse:
     """Upload GeoJSON contours; answered 202 while the dataset builds in the background."""
     body = await read_limited(request, settings.max_upload_bytes)
@@ -106,6 +123,7 @@ async def upload_dataset(
         interval=interval,
         source_scale=source_scale or settings.source_scale,
         target_scale=target_scale or settings.target_scale,
+        cartography=CartographyOptions(units, index_every, attribute_names, schedule, attribution),
     )
     service.start_upload_build(upload, contour_set)
     out: dict[str, Any] = {

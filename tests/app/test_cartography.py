@@ -204,3 +204,58 @@ def test_tilejson_attribution_is_escaped_and_version_follows_the_data(feet_serve
         again.stop()
     assert after["data_version"] > before["data_version"]
     assert after["version"] != before["version"]
+
+
+# -- options per dataset, given with an upload ---------------------------------------------------------------
+
+
+def wait_ready(client, ident: str, timeout: float = 120.0) -> dict:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        d = client.get(f"/datasets/{ident}").json()
+        if d.get("state") in ("ready", "failed"):
+            return d
+        time.sleep(0.2)
+    raise TimeoutError(ident)
+
+
+def test_upload_options_name_the_elevation_ele_and_set_units_and_schedule(client):
+    body = json.dumps({"type": "FeatureCollection", "features": synthetic_features()})
+    headers = {"content-type": "application/geo+json"}
+    query = "id=mc&attribute_names=maplibre-contour&units=ft&schedule=20:60000,100:90000,200&attribution=Me%20%3CI%3E"
+    r = client.post(f"/datasets?{query}", content=body, headers=headers)
+    assert r.status_code == 202, r.text
+    assert wait_ready(client, "mc")["state"] == "ready"
+    tj = client.get("/tiles/mc/tilejson.json").json()
+    carto = tj["ccsm_cartography"]
+    assert (carto["units"], carto["attribute_names"]) == ("ft", "maplibre-contour")
+    assert [(k["step"], k["hide_scale"]) for k in carto["schedule"]] == [(20, 60_000), (100, 90_000), (200, None)]
+    assert tj["attribution"] == "Me &lt;I&gt;"
+    assert {"ele", "level"} <= set(tj["vector_layers"][0]["fields"]) and "elevation" not in tj["vector_layers"][0][
+        "fields"
+    ]
+    feats = decode(client.get("/tiles/mc/{}/{}/{}.mvt".format(*tile_for(LON0, LAT0, 13))).content)["contours"][
+        "features"
+    ]
+    assert feats and all("ele" in f["properties"] and "elevation" not in f["properties"] for f in feats)
+    labels = labels_at(client.get, "/tiles/mc", tj["bounds"], 14)
+    assert labels and all(p["label"] == f"{p['ele']:g} ft" for *_, p in labels)
+
+
+@pytest.mark.parametrize(
+    ("query", "where"),
+    [
+        ("schedule=20:1e5,30", "schedule entry 2 '30'"),
+        ("schedule=50:1e5,100", "step 50 must divide"),
+        ("units=yards", "units"),
+        ("index_every=1", "index_every"),
+    ],
+)
+def test_bad_upload_options_get_a_4xx_naming_them(client, query, where):
+    body = json.dumps({"type": "FeatureCollection", "features": synthetic_features()[:4]})
+    r = client.post(f"/datasets?id=bad&{query}", content=body, headers={"content-type": "application/geo+json"})
+    if r.status_code == 202:  # a schedule that fits no level is found when the dataset is read
+        wait_ready(client, "bad")
+        r = client.get("/tiles/bad/tilejson.json")
+        client.delete("/datasets/bad")
+    assert 400 <= r.status_code < 500 and where in r.text, (r.status_code, r.text)
