@@ -117,6 +117,7 @@ class Renderer:
         self._packs: dict[str, DatasetPack] = {}
         self._cartography: dict[str, tuple[int, DatasetCartography]] = {}
         self._labels: dict[str, tuple[int, LabelAnchors]] = {}
+        self._labels_lock = threading.Lock()  # placing a dataset's labels takes seconds: once, not per request
         self._pack_lock = threading.Lock()
 
     # -- datasets ----------------------------------------------------------------------------------------
@@ -205,7 +206,7 @@ class Renderer:
         if cached is not None and cached[0] == info.data_version:
             return cached[1]
         carto = self.cartography(dataset)
-        with self._pack_lock:
+        with self._labels_lock:
             cached = self._labels.get(dataset)
             if cached is not None and cached[0] == info.data_version:
                 return cached[1]

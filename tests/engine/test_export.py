@@ -116,7 +116,7 @@ def test_mbtiles_metadata(mbtiles: Path, info: DatasetInfo) -> None:
     west, south, east, north = lonlat_bounds(info)
     assert west <= lon <= east and south <= lat <= north and MINZOOM <= zoom <= MAXZOOM
     doc = json.loads(meta["json"])
-    assert [layer["id"] for layer in doc["vector_layers"]] == ["contours", "contours_end"]
+    assert [layer["id"] for layer in doc["vector_layers"]] == ["contours", "contours_end", "contour_labels"]
     assert {"elevation", "index", "t", "t8", "min_zoom"} <= set(doc["vector_layers"][0]["fields"])
     assert doc["ccsm_morph"] == {"version": 1, "t_samples": 8, "start_layer": "contours", "end_layer": "contours_end"}
 
@@ -158,7 +158,7 @@ def test_pmtiles_header_and_metadata(pmtiles_path: Path, info: DatasetInfo, expe
     assert west <= header["center_lon_e7"] / 1e7 <= east and south <= header["center_lat_e7"] / 1e7 <= north
     assert MINZOOM <= header["center_zoom"] <= MAXZOOM
     assert meta["name"] == "small contours" and meta["attribution"]
-    assert [layer["id"] for layer in meta["vector_layers"]] == ["contours", "contours_end"]
+    assert [layer["id"] for layer in meta["vector_layers"]] == ["contours", "contours_end", "contour_labels"]
     assert meta["ccsm_morph"]["t_samples"] == 8 and meta["ccsm_morph"]["version"] == 1
 
 
