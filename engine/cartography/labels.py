@@ -179,14 +179,15 @@ def contour_candidates(
     # Greedy along the line (earlier-shown, then straighter, first): labels at least `spacing_px` of line
     # apart at the zoom both show.
     s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(base, axis=0).T))])
-    chosen: list[int] = []
+    at = s[cand]
+    spacing = style.spacing_px * metres_per_px(first)  # metres of line, at each candidate's first zoom
+    taken = np.zeros(len(cand), dtype=bool)
     for j in np.lexsort((-score, first)).tolist():
-        i = cand[j]
-        if all(
-            abs(s[i] - s[cand[c]]) >= style.spacing_px * float(metres_per_px(max(first[j], first[c]))) for c in chosen
-        ):
-            chosen.append(j)
-    pick = np.array(sorted(chosen), dtype=np.intp)
+        k = np.flatnonzero(taken)
+        # both show from the later of their first zooms, where the spacing in metres is the smaller one
+        if not (np.abs(at[k] - at[j]) < np.minimum(spacing[k], spacing[j])).any():
+            taken[j] = True
+    pick = np.flatnonzero(taken)
     rows = cand[pick]
     half = label_px * metres_per_px(first[pick]) / 2
     ends = [np.clip(s[rows] + sign * half, 0.0, s[-1]) for sign in (-1.0, 1.0)]
