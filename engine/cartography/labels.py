@@ -183,9 +183,9 @@ def contour_candidates(
     spacing = style.spacing_px * metres_per_px(first)  # metres of line, at each candidate's first zoom
     taken = np.zeros(len(cand), dtype=bool)
     for j in np.lexsort((-score, first)).tolist():
-        k = np.flatnonzero(taken)
+        kept = np.flatnonzero(taken)
         # both show from the later of their first zooms, where the spacing in metres is the smaller one
-        if not (np.abs(at[k] - at[j]) < np.minimum(spacing[k], spacing[j])).any():
+        if not (np.abs(at[kept] - at[j]) < np.minimum(spacing[kept], spacing[j])).any():
             taken[j] = True
     pick = np.flatnonzero(taken)
     rows = cand[pick]
