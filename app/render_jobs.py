@@ -67,6 +67,7 @@ class SimplifyJob:
     scale: float
     bbox: list[float] | None
     method: str
+    all_levels: bool = False  # keep the levels the interval schedule no longer draws at this scale
     store: Path | None = None  # the store file the request's service reads (replicas switch files)
 
 
@@ -100,18 +101,21 @@ def run_job(renderer: Renderer, job: Job) -> Rendered:
     if isinstance(job, MorphJob):
         tile = renderer.morph_tile(job.dataset, job.z, job.x, job.y)
         return Rendered(tile.data, tile.scale)
-    result = simplify_dataset(renderer, job.dataset, job.scale, bbox_lonlat=job.bbox, method=job.method)
-    doc = feature_collection(result.contours, job.scale, job.method)
+    result = simplify_dataset(
+        renderer, job.dataset, job.scale, bbox_lonlat=job.bbox, method=job.method, all_levels=job.all_levels
+    )
+    doc = feature_collection(result.contours, job.scale, job.method, dropped=result.dropped)
     doc["dataset"] = job.dataset
     return Rendered(json.dumps(doc, separators=(",", ":"), allow_nan=False).encode(), job.scale)
 
 
 def warm(renderer: Renderer) -> None:
-    """Pack every stored dataset now, so that cost (seconds on a large dataset) is paid before the worker
-    takes its first request, not inside one request's deadline."""
+    """Pack every stored dataset and place its labels now, so that cost (seconds on a large dataset) is paid
+    before the worker takes its first request, not inside one request's deadline."""
     for dataset in renderer.store.dataset_ids():
         try:
             renderer.pack(dataset)
+            renderer.labels(dataset)  # label placement runs once per data version: seconds on the sample
         except Exception:  # a dataset that cannot be packed fails in its own requests, with its own error
             log.warning("render worker: could not pack %s ahead of use", dataset, exc_info=True)
 

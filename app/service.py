@@ -13,7 +13,7 @@ import json
 import logging
 import os
 import uuid
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +22,8 @@ import numpy as np
 from app.builds import BuildRunner
 from app.errors import BuildQueueFull, DatasetExists, MalformedUpload, log_safe
 from app.settings import Settings
+from engine.cartography.options import PARAMS_KEY as CARTOGRAPHY_KEY
+from engine.cartography.options import CartographyOptions
 from engine.errors import StoreError, StoreNotReady, StoreUnwritable, UnknownLayer
 from engine.serve.build_job import BuildJob
 from engine.serve.datasets import SourceSpec, build_lock, slugify, source_hash
@@ -50,6 +52,7 @@ def specs_from_settings(settings: Settings) -> list[SourceSpec]:
         "interval": settings.interval,
         "source_scale": settings.source_scale,
         "target_scale": settings.target_scale,
+        "cartography": settings.cartography,
     }
     if settings.sources:
         specs = []
@@ -107,15 +110,30 @@ class UploadParams:
     interval: float | None
     source_scale: float
     target_scale: float
+    cartography: CartographyOptions | None = None
 
     def as_dict(self) -> dict[str, Any]:
-        """The parameters as stored with the dataset."""
-        return {
+        """The parameters that decide the build (part of the content hash); cartography options only when
+        they differ from the defaults, so hashes of uploads without them stay as they were."""
+        params: dict[str, Any] = {
             "elevation_field": self.elevation_field,
             "interval": self.interval,
             "source_scale": self.source_scale,
             "target_scale": self.target_scale,
         }
+        options = (self.cartography or CartographyOptions()).checked()
+        if options != CartographyOptions():
+            params[CARTOGRAPHY_KEY] = options.as_params()
+        return params
+
+    def stored(self, source: Path) -> dict[str, Any]:
+        """The parameters as stored with the dataset: the vertical unit resolved (given, else as the
+        elevation property's name states it, else metres)."""
+        from engine.io.vector import elevation_units
+
+        options = (self.cartography or CartographyOptions()).checked()
+        units = options.units or elevation_units(source, self.elevation_field) or "m"
+        return {**self.as_dict(), CARTOGRAPHY_KEY: replace(options, units=units).as_params()}
 
 
 def check_upload_document(body: bytes) -> None:
@@ -245,6 +263,7 @@ class DatasetService:
         from engine.params import BuildParams
 
         BuildParams(source_scale=params.source_scale, target_scale=params.target_scale)  # validates the scales
+        params.as_dict()  # bad cartography options are refused before anything is kept
         check_upload_document(body)
         if dataset and self._taken(dataset):  # early answer; the reservation below decides
             raise DatasetExists(f"dataset {dataset!r} exists already; DELETE it first or choose another id")
@@ -256,6 +275,7 @@ class DatasetService:
             ident = self._reserve(dataset, name, len(contour_set.contours), body, params)
             path = self.upload_dir / f"{ident}-{uuid.uuid4().hex[:8]}.geojson"
             incoming.rename(path)
+            stored = params.stored(path)
         except BaseException:
             incoming.unlink(missing_ok=True)
             raise
@@ -265,7 +285,7 @@ class DatasetService:
             dataset=ident,
             source_path=str(path),
             name=name or ident,
-            params=params.as_dict(),
+            params=stored,
             digest=source_hash(None, params.as_dict(), data=body),
             workers=1,
         )

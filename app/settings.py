@@ -8,10 +8,13 @@ are cut and cached, and the HTTP API (CORS, upload limit). ``Settings`` holds al
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import Field, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
+
+from engine.cartography.options import CartographyOptions
+from engine.cartography.schedule import parse_schedule
 
 #: The project folder (where web/ lives), so relative paths do not depend on the working directory.
 PROJECT_DIR = Path(__file__).resolve().parents[1]
@@ -50,6 +53,21 @@ class Settings(BaseSettings):
     )
     build_queue: int = Field(
         4, ge=0, le=1000, description="Builds waiting for a free slot; one more upload is refused with 429."
+    )
+
+    # -- cartography of the sources (docs/design.md section 9) -------------------------------------------
+    units: Literal["m", "ft"] | None = Field(
+        None, description="Vertical unit of the sources; unset = as the source states it, else m."
+    )
+    index_every: int = Field(5, ge=2, le=100, description="Index contours are every n-th interval.")
+    attribute_names: Literal["ccsm", "maplibre-contour"] = Field(
+        "ccsm", description="Tile attribute names: ccsm (elevation) or maplibre-contour (ele)."
+    )
+    schedule: str | None = Field(
+        None, description="Interval schedule override STEP:HIDE_SCALE,...,STEP; unset = the default rule."
+    )
+    attribution: str | None = Field(
+        None, description="Attribution of the sources in TileJSON; unset = the source file's name."
     )
 
     # -- tiles --------------------------------------------------------------------------------------------
@@ -128,6 +146,13 @@ class Settings(BaseSettings):
             return [v.strip() for v in text.split(",") if v.strip()]
         return value
 
+    @field_validator("schedule")
+    @classmethod
+    def _check_schedule(cls, value: str | None) -> str | None:
+        if value is not None:
+            parse_schedule(value)  # InvalidParameter (a ValueError) names the bad entry
+        return value
+
     @model_validator(mode="after")
     def _check(self) -> Settings:
         if self.min_zoom > self.max_zoom:
@@ -137,6 +162,15 @@ class Settings(BaseSettings):
                 f"target_scale {self.target_scale:g} must exceed source_scale {self.source_scale:g}"
             )
         return self
+
+    @property
+    def cartography(self) -> CartographyOptions | None:
+        """The sources' cartography options; None when every one is at its default (the hash of a source
+        built before these options existed stays the same)."""
+        options = CartographyOptions(
+            self.units, self.index_every, self.attribute_names, self.schedule, self.attribution
+        )
+        return None if options == CartographyOptions() else options
 
     @property
     def max_upload_bytes(self) -> int:

@@ -26,6 +26,7 @@ from engine.errors import CCSMError
 from engine.types import BadFeature
 
 if TYPE_CHECKING:
+    from engine.cartography.options import CartographyOptions
     from engine.store.sqlite import CCSStore, DatasetInfo
 
 err_console = Console(stderr=True)
@@ -99,6 +100,33 @@ IntervalOption = Annotated[
     float | None, typer.Option("--interval", help="Contour interval of a DEM source, in its vertical unit.")
 ]
 
+#: Cartography options of a source (docs/design.md section 9), shared by simplify and export.
+UnitsOption = Annotated[
+    str | None, typer.Option("--units", help="Vertical unit m or ft (default: as the source states it, else m).")
+]
+IndexEveryOption = Annotated[int, typer.Option("--index-every", help="Index contours are every n-th interval.")]
+AttributeNamesOption = Annotated[
+    str, typer.Option("--attribute-names", help="Tile attribute names: ccsm (elevation) or maplibre-contour (ele).")
+]
+ScheduleOption = Annotated[
+    str | None,
+    typer.Option("--schedule", help="Interval schedule override STEP:HIDE_SCALE,...,STEP (default: the rule)."),
+]
+AttributionOption = Annotated[
+    str | None, typer.Option("--attribution", help="Who made the data (TileJSON attribution).")
+]
+
+
+def cartography_options(
+    units: str | None, index_every: int, attribute_names: str, schedule: str | None, attribution: str | None
+) -> CartographyOptions | None:
+    """The cartography options given on the command line, checked (InvalidParameter names a bad one); None
+    when all are at their defaults, so a source built without them is found in the cache again."""
+    from engine.cartography.options import CartographyOptions
+
+    options = CartographyOptions(units, index_every, attribute_names, schedule, attribution)
+    return None if options == CartographyOptions() else options.checked()
+
 
 def default_cache_store() -> Path:
     """Where ``ccsm simplify`` keeps what it builds, so a second scale or method costs seconds."""
@@ -139,6 +167,15 @@ def simplify(
             help="Store that keeps built sources by content hash [$XDG_CACHE_HOME/ccsm/sources.ccsm.sqlite].",
         ),
     ] = None,
+    all_levels: Annotated[
+        bool,
+        typer.Option("--all-levels", help="Keep the levels the interval schedule no longer draws at --scale."),
+    ] = False,
+    units: UnitsOption = None,
+    index_every: IndexEveryOption = 5,
+    attribute_names: AttributeNamesOption = "ccsm",
+    schedule: ScheduleOption = None,
+    attribution: AttributionOption = None,
 ) -> None:
     """Write every contour of SOURCE as it looks at one map scale.
 
@@ -160,6 +197,7 @@ def simplify(
     started = time.perf_counter()
     with bad_input_exits():
         check_method(method)
+        cartography = cartography_options(units, index_every, attribute_names, schedule, attribution)
         if not source.exists():
             fail(f"{source}: file not found")
         cache, info = build_into_cache(
@@ -170,11 +208,17 @@ def simplify(
             source_scale=source_scale,
             target_scale=target_scale,
             workers=workers,
+            cartography=cartography,
         )
         to_crs = output_crs(crs, info.source_crs)
-        result = simplify_dataset(Renderer(cache), info.id, scale, method=method)
+        result = simplify_dataset(Renderer(cache), info.id, scale, method=method, all_levels=all_levels)
         doc = feature_collection(
-            result.contours, scale, method, crs=to_crs, decimals=7 if parse_crs(to_crs).is_geographic else 3
+            result.contours,
+            scale,
+            method,
+            crs=to_crs,
+            decimals=7 if parse_crs(to_crs).is_geographic else 3,
+            dropped=result.dropped,
         )
         write_json_atomically(out, doc)
     bad = [BadFeature(b["id"], b["reason"], b.get("where", "")) for b in info.bad_features]
@@ -183,7 +227,8 @@ def simplify(
         err_console.print(_bad_feature_table(bad))
     console.print(
         f"{out}: {len(result.contours)} contours at 1:{scale:,.0f} ({method}, CRS {to_crs}); "
-        f"{result.vanished} too small to show at this scale (left out); {len(bad)} bad feature(s); "
+        f"{result.vanished} too small to show at this scale (left out); "
+        f"{result.dropped} dropped (their level is not drawn at this scale); {len(bad)} bad feature(s); "
         f"{n_in} input feature(s); {time.perf_counter() - started:.1f} s",
         highlight=False,
         soft_wrap=True,
@@ -199,6 +244,7 @@ def build_into_cache(
     source_scale: float,
     target_scale: float,
     workers: int | None,
+    cartography: CartographyOptions | None = None,
 ) -> tuple[CCSStore, DatasetInfo]:
     """Build a source into the cache store (once per content hash of its bytes and scales), with a progress bar.
 
@@ -216,6 +262,7 @@ def build_into_cache(
         interval=interval,
         source_scale=source_scale,
         target_scale=target_scale,
+        cartography=cartography,
     )
     spec = replace(spec, dataset="src-" + source_hash(spec.path, spec.params())[:16])
     store_path = store or default_cache_store()

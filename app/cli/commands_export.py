@@ -24,11 +24,17 @@ from rich.progress import (
 
 from app.cli import app
 from app.cli.commands_engine import (
+    AttributeNamesOption,
+    AttributionOption,
+    IndexEveryOption,
     IntervalOption,
+    ScheduleOption,
     SourceScaleOption,
     TargetScaleOption,
+    UnitsOption,
     bad_input_exits,
     build_into_cache,
+    cartography_options,
     check_scale,
     console,
     err_console,
@@ -112,6 +118,11 @@ def export(
         typer.Option("--elevation-field", help="Elevation attribute of a contour file (found by name if omitted)."),
     ] = None,
     interval: IntervalOption = None,
+    units: UnitsOption = None,
+    index_every: IndexEveryOption = 5,
+    attribute_names: AttributeNamesOption = "ccsm",
+    schedule: ScheduleOption = None,
+    attribution: AttributionOption = None,
 ) -> None:
     """Write the morph tiles of a source or stored dataset to a PMTiles or MBTiles archive (gzip MVT).
 
@@ -130,6 +141,7 @@ def export(
     with bad_input_exits():
         check_zoom_range(minzoom, maxzoom)
         check_writable(out)  # before any build: an unwritable or unknown target fails at once
+        cartography = cartography_options(units, index_every, attribute_names, schedule, attribution)
         if source is not None and dataset is not None:
             fail("give either SOURCE or --dataset, not both")
         if source is None and dataset is None:
@@ -143,6 +155,7 @@ def export(
                 source_scale=source_scale,
                 target_scale=target_scale,
                 workers=workers,
+                cartography=cartography,
             )
             store_path = cache.path
             dataset_id = info.id

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Depends, Path, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
@@ -13,6 +13,7 @@ from app.errors import UploadTooLarge
 from app.security import require_json_body, require_writer
 from app.service import DatasetService, UploadParams
 from app.settings import Settings
+from engine.cartography.options import CartographyOptions
 
 router = APIRouter(tags=["datasets"])
 
@@ -101,6 +102,22 @@ async def upload_dataset(
     target_scale: Annotated[
         float | None, Query(description="Scale denominator of t = 1.", gt=0, le=1e10, allow_inf_nan=False)
     ] = None,
+    units: Annotated[
+        Literal["m", "ft"] | None,
+        Query(description="Vertical unit (default: as the elevation property's name states it, else m)."),
+    ] = None,
+    index_every: Annotated[int, Query(description="Index contours are every n-th interval.", ge=2, le=100)] = 5,
+    attribute_names: Annotated[
+        Literal["ccsm", "maplibre-contour"], Query(description="Tile attribute names (maplibre-contour: `ele`).")
+    ] = "ccsm",
+    schedule: Annotated[
+        str | None,
+        Query(description="Interval schedule override STEP:HIDE_SCALE,...,STEP (docs/design.md section 9).",
+              max_length=500),
+    ] = None,
+    attribution: Annotated[
+        str | None, Query(description="Who made the data, for TileJSON.", max_length=500)
+    ] = None,
 ) -> JSONResponse:
     """Upload GeoJSON contours (the document itself is the body); answered 202 while the dataset builds in
     a build process of its own."""
@@ -110,6 +127,7 @@ async def upload_dataset(
         interval=interval,
         source_scale=source_scale or settings.source_scale,
         target_scale=target_scale or settings.target_scale,
+        cartography=CartographyOptions(units, index_every, attribute_names, schedule, attribution),
     )
     out: dict[str, Any] = await run_in_threadpool(service.upload, body, dataset=id, name=name, params=params)
     return JSONResponse(out, status_code=202, headers={"Location": out["href"], **NO_STORE})

@@ -63,14 +63,20 @@ async def simplify(
         Query(description="Only contours meeting west,south,east,north (degrees).", max_length=200),
     ] = None,
     method: Annotated[MethodName, Query(description="ccsm, dp, wm, vw or original.")] = "ccsm",
+    all_levels: Annotated[
+        bool,
+        Query(description="Keep the levels the interval schedule no longer draws at this scale (counted in "
+              "`dropped` otherwise)."),
+    ] = False,
 ) -> Response:
     """Every visible contour at a scale, with elevation, t, similarity and scale per feature."""
     ident = dataset or service.default_dataset()
     box = parse_bbox(bbox)
     version = service.require_ready(ident)
-    etag = make_etag("simplify", ident, version, scale, box, method, accepts_gzip(request))
+    etag = make_etag("simplify", ident, version, scale, box, method, all_levels, accepts_gzip(request))
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
-    result = await lanes.heavy.run(SimplifyJob(ident, scale, box, method, store=service.settings.store_path))
+    job = SimplifyJob(ident, scale, box, method, all_levels, store=service.settings.store_path)
+    result = await lanes.heavy.run(job)
     return body_response(request, result.body or b"", "application/geo+json", headers)

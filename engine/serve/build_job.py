@@ -22,6 +22,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from engine.cartography.options import PARAMS_KEY, CartographyOptions
 from engine.errors import BuildCancelled, CCSMError
 from engine.io.source import read_source
 from engine.serve.datasets import SourceSpec, build_and_save, build_dataset, build_lock
@@ -111,7 +112,10 @@ def run(job: BuildJob) -> int:
                 only_if_building=True,
             )
         else:
-            spec = SourceSpec(Path(job.source_path), job.dataset, job.name, **job.params)
+            fields = dict(job.params)
+            if PARAMS_KEY in fields:  # the options travel as plain values; the spec takes the dataclass
+                fields[PARAMS_KEY] = CartographyOptions.from_params(job.params)
+            spec = SourceSpec(Path(job.source_path), job.dataset, job.name, **fields)
             with build_lock(Path(job.store_path)):
                 progress(0, 0)  # cancelled while waiting for the lock: stop here
                 _, rebuilt = build_dataset(

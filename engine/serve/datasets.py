@@ -15,10 +15,12 @@ import unicodedata
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from engine.cartography.options import PARAMS_KEY, CartographyOptions
+from engine.cartography.units import source_units
 from engine.ccsm.build import BuiltSet, build_contour_set
 from engine.io.source import read_source
 from engine.params import BuildParams
@@ -63,6 +65,9 @@ class SourceSpec:
         A DEM's window side in cells (see :func:`engine.io.dem.contours_from_dem`); None = chosen by size.
     source_scale, target_scale
         Scale denominators of t = 0 and t = 1.
+    cartography
+        Units, index contours, attribute names and schedule override (docs/design.md section 9); None for the
+        defaults (units then as the source states them, else metres).
     """
 
     path: Path
@@ -73,6 +78,7 @@ class SourceSpec:
     source_scale: float = 50_000.0
     target_scale: float = 500_000.0
     block: int | None = None
+    cartography: CartographyOptions | None = None
 
     def params(self) -> dict[str, Any]:
         """The parameters that decide the build (part of the content hash)."""
@@ -84,7 +90,18 @@ class SourceSpec:
         }
         if self.block is not None:  # a DEM's window side decides the lines' ids; absent, older hashes hold
             params["block"] = self.block
+        if self.cartography is not None:
+            params[PARAMS_KEY] = self.cartography.checked().as_params()
         return params
+
+    def stored_params(self) -> dict[str, Any]:
+        """The parameters as stored with the dataset: :meth:`params` with the vertical unit resolved (given,
+        else as the source states it, else metres)."""
+        options = (self.cartography or CartographyOptions()).checked()
+        if options.units is None:
+            units = source_units(self.path, self.elevation_field) or "m"
+            options = replace(options, units=units)
+        return {**self.params(), PARAMS_KEY: options.as_params()}
 
 
 _ID_CHARS = frozenset("abcdefghijklmnopqrstuvwxyz0123456789_-")
@@ -228,6 +245,7 @@ def build_dataset(
     if not force and store.source_hash_of(spec.dataset) == digest:
         return store.dataset(spec.dataset), False
     BuildParams(source_scale=spec.source_scale, target_scale=spec.target_scale)  # bad scales fail before reading
+    params = spec.stored_params()  # bad cartography options fail before reading too
     contour_set = read_source(
         spec.path, elevation_field=spec.elevation_field, interval=spec.interval, block=spec.block, executor=executor
     )
@@ -238,7 +256,7 @@ def build_dataset(
         name=spec.name,
         source=spec.path.name,
         digest=digest,
-        params=spec.params(),
+        params=params,
         workers=workers,
         progress=progress,
         only_if_building=only_if_building,

@@ -28,14 +28,19 @@ class SimplifiedContour:
     t: float
     similarity: float
     coords_3857: Coords
+    level: int = 0
+    rank: int = 0
 
 
 @dataclass(frozen=True)
 class Simplified:
-    """The answer for a dataset at a scale: the contours drawn, and how many were left out as too small."""
+    """The answer for a dataset at a scale: the contours drawn, how many were left out as too small
+    (``vanished``), and how many because their level is not drawn at that scale (``dropped``: fully faded
+    by the interval schedule, docs/design.md section 9)."""
 
     contours: list[SimplifiedContour]
     vanished: int
+    dropped: int = 0
 
 
 def simplify(
@@ -45,6 +50,7 @@ def simplify(
     *,
     bbox_lonlat: Sequence[float] | None = None,
     method: str = "ccsm",
+    all_levels: bool = False,
 ) -> Simplified:
     """Every contour of a dataset at a scale denominator.
 
@@ -58,6 +64,9 @@ def simplify(
         (west, south, east, north) degrees: only contours whose extent meets it.
     method
         ccsm, dp, wm, vw or original.
+    all_levels
+        Keep the levels the interval schedule no longer draws at this scale (by default they are left out and
+        counted in ``dropped``).
 
     Raises
     ------
@@ -73,19 +82,33 @@ def simplify(
         xs, ys = lonlat_to_mercator(np.array([bbox.minx, bbox.maxx]), np.array([bbox.miny, bbox.maxy]))
         fids = renderer.store.query(dataset, (xs[0], ys[0], xs[1], ys[1]))
     recs = renderer.records(fids)
-    shown = [r for r in recs if how.is_visible(r, value)]
+    schedule = renderer.cartography(dataset).schedule
+    ranks = schedule.rank_of([r.elevation for r in recs]).tolist()
+    faded = [schedule.ranks[k].hide_scale is not None and value >= schedule.ranks[k].hide_scale for k in ranks]
+    kept = [(r, k) for r, k, f in zip(recs, ranks, faded, strict=True) if all_levels or not f]
+    shown = [(r, k) for r, k in kept if how.is_visible(r, value)]
+    dropped = len(recs) - len(kept)
     if not shown:
-        return Simplified([], len(recs))
-    ts = t_at_scales(info.ladder, np.stack([r.t_at_scale for r in shown]), value)
+        return Simplified([], len(kept), dropped)
+    ts = t_at_scales(info.ladder, np.stack([r.t_at_scale for r, _ in shown]), value)
+    levels = schedule.level_of([r.elevation for r, _ in shown]).tolist()
     out = []
-    for rec, t in zip(shown, ts.tolist(), strict=True):
+    for (rec, rank), t, level in zip(shown, ts.tolist(), levels, strict=True):
         xy, sim = how.contour_at(rec, t, value, info)
         out.append(
             SimplifiedContour(
-                rec.fid, rec.contour_id, float(rec.elevation), rec.closed, round(t, T_DECIMALS), sim, xy
+                rec.fid,
+                rec.contour_id,
+                float(rec.elevation),
+                rec.closed,
+                round(t, T_DECIMALS),
+                sim,
+                xy,
+                level,
+                rank,
             )
         )
-    return Simplified(out, len(recs) - len(shown))
+    return Simplified(out, len(kept) - len(shown), dropped)
 
 
 def _to_lonlat(xy: Coords) -> Coords:
@@ -100,9 +123,10 @@ def feature_collection(
     *,
     crs: str = "EPSG:4326",
     decimals: int = 7,
+    dropped: int | None = None,
 ) -> dict[str, Any]:
     """A GeoJSON FeatureCollection of simplified contours (RFC 7946 in EPSG:4326; another CRS is named in a
-    ``crs`` member, as GDAL reads it)."""
+    ``crs`` member, as GDAL reads it); ``dropped`` (the levels left out at this scale) as a top-level member."""
     to_crs = _to_lonlat if crs == "EPSG:4326" else make_transformer(WEB_MERCATOR, crs)
     doc: dict[str, Any] = {
         "type": "FeatureCollection",
@@ -115,6 +139,8 @@ def feature_collection(
                     "elevation": c.elevation,
                     "t": c.t,
                     "similarity": round(c.similarity, 6),
+                    "level": c.level,
+                    "rank": c.rank,
                     "scale": scale,
                     "method": method,
                 },
@@ -126,6 +152,8 @@ def feature_collection(
             for c in contours
         ],
     }
+    if dropped is not None:
+        doc["dropped"] = dropped
     if crs != "EPSG:4326":
         doc["crs"] = {"type": "name", "properties": {"name": crs}}
     return doc

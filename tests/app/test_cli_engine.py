@@ -55,11 +55,12 @@ def read_csv(path: Path) -> list[dict[str, str]]:
 
 def summary_counts(stdout: str) -> dict[str, int]:
     m = re.search(
-        r": (\d+) contours at .*?; (\d+) too small .*?; (\d+) bad feature\(s\); (\d+) input feature\(s\)",
+        r": (\d+) contours at .*?; (\d+) too small .*?; (\d+) dropped .*?; (\d+) bad feature\(s\); "
+        r"(\d+) input feature\(s\)",
         stdout.replace("\n", " "),
     )
     assert m, stdout
-    return dict(zip(("written", "vanished", "bad", "input"), map(int, m.groups()), strict=True))
+    return dict(zip(("written", "vanished", "dropped", "bad", "input"), map(int, m.groups()), strict=True))
 
 
 # --- simplify ---------------------------------------------------------------------------------------------
@@ -75,7 +76,7 @@ def test_simplify_subset_writes_every_contour_with_properties(
     )
     assert result.exit_code == 0, result.output
     counts = summary_counts(result.stdout)
-    assert counts["written"] + counts["vanished"] + counts["bad"] == counts["input"] == SUBSET
+    assert counts["written"] + counts["vanished"] + counts["dropped"] + counts["bad"] == counts["input"] == SUBSET
     features = json.loads(out.read_text())["features"]
     assert len(features) == counts["written"]
     for f in features:
@@ -109,7 +110,7 @@ def test_simplify_whole_sample_at_source_scale_returns_the_input(
     result = run("simplify", sample_contours_path(), "--scale", "50000", "-o", out, "--crs", "3857")
     assert result.exit_code == 0, result.output
     counts = summary_counts(result.stdout)
-    assert counts["written"] + counts["vanished"] + counts["bad"] == counts["input"]
+    assert counts["written"] + counts["vanished"] + counts["dropped"] + counts["bad"] == counts["input"]
     assert counts["input"] == len(sample_set.contours) + len(sample_set.bad_features)
     features = json.loads(out.read_text())["features"]
     assert len(features) == counts["written"] > 0.9 * counts["input"]

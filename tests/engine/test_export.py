@@ -98,7 +98,8 @@ def test_the_test_set_has_empty_and_non_empty_tiles_at_every_zoom(expected: dict
     # The archive tests below compare against these tiles: they must cover every zoom and leave some out.
     assert {z for z, _, _ in expected} == set(range(MINZOOM, MAXZOOM + 1))
     assert len(expected) < len(pyramid(info.bounds_3857, MINZOOM, MAXZOOM))
-    assert all(set(decoded(d)) == {"contours", "contours_end"} for d in expected.values())
+    assert all({"contours", "contours_end"} <= set(decoded(d)) <= {"contours", "contours_end", "contour_labels"}
+               for d in expected.values())
 
 
 # -- MBTiles, read with sqlite3 ----------------------------------------------------------------------------
@@ -115,7 +116,7 @@ def test_mbtiles_metadata(mbtiles: Path, info: DatasetInfo) -> None:
     west, south, east, north = lonlat_bounds(info)
     assert west <= lon <= east and south <= lat <= north and MINZOOM <= zoom <= MAXZOOM
     doc = json.loads(meta["json"])
-    assert [layer["id"] for layer in doc["vector_layers"]] == ["contours", "contours_end"]
+    assert [layer["id"] for layer in doc["vector_layers"]] == ["contours", "contours_end", "contour_labels"]
     assert {"elevation", "index", "t", "t8", "min_zoom"} <= set(doc["vector_layers"][0]["fields"])
     assert doc["ccsm_morph"] == {"version": 1, "t_samples": 8, "start_layer": "contours", "end_layer": "contours_end"}
 
@@ -157,7 +158,7 @@ def test_pmtiles_header_and_metadata(pmtiles_path: Path, info: DatasetInfo, expe
     assert west <= header["center_lon_e7"] / 1e7 <= east and south <= header["center_lat_e7"] / 1e7 <= north
     assert MINZOOM <= header["center_zoom"] <= MAXZOOM
     assert meta["name"] == "small contours" and meta["attribution"]
-    assert [layer["id"] for layer in meta["vector_layers"]] == ["contours", "contours_end"]
+    assert [layer["id"] for layer in meta["vector_layers"]] == ["contours", "contours_end", "contour_labels"]
     assert meta["ccsm_morph"]["t_samples"] == 8 and meta["ccsm_morph"]["version"] == 1
 
 
