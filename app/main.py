@@ -18,7 +18,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.errors import add_exception_handlers
 from app.lifespan import lifespan
-from app.routes import datasets, meta, simplify, tiles
+from app.routes import datasets, hillshade, meta, simplify, tiles
 from app.settings import Settings
 
 DESCRIPTION = """
@@ -75,6 +75,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     add_exception_handlers(app)
     app.include_router(tiles.router)
+    app.include_router(hillshade.router)
     app.include_router(simplify.router)
     app.include_router(datasets.router)
     app.include_router(meta.router)

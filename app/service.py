@@ -26,6 +26,7 @@ from app.errors import DatasetExists, MalformedUpload, public_message
 from app.settings import Settings
 from engine.errors import CCSMError, StoreNotReady, UnknownLayer
 from engine.serve.datasets import SourceSpec, build_and_save, build_dataset, slugify, source_hash
+from engine.serve.relief import ReliefCache
 from engine.serve.renderer import Renderer, TileOptions
 from engine.store.sqlite import CCSStore, DatasetInfo
 from engine.tiles.grid import mercator_to_lonlat
@@ -58,11 +59,19 @@ def specs_from_settings(settings: Settings) -> list[SourceSpec]:
             specs.append(SourceSpec(path=path, dataset=ident, name=path.stem, **common))  # type: ignore[arg-type]
         return specs
     if settings.serve_sample:
+        from engine.io.sample import sample_dem_path
         from engine.io.source import sample_contours_path
 
         common["elevation_field"] = None
         common["interval"] = None
-        return [SourceSpec(path=sample_contours_path(), dataset=SAMPLE_ID, name=SAMPLE_NAME, **common)]  # type: ignore[arg-type]
+        # The sample's contours were traced from the bundled DEM: shade that under them.
+        try:
+            relief = {"relief_dem": sample_dem_path()}
+        except CCSMError:  # no DEM beside the sample (an installed wheel): no hillshade, contours still served
+            relief = {}
+        return [
+            SourceSpec(path=sample_contours_path(), dataset=SAMPLE_ID, name=SAMPLE_NAME, **common, **relief)  # type: ignore[arg-type]
+        ]
     return []
 
 
@@ -96,6 +105,7 @@ class DatasetService:
     def __init__(self, settings: Settings) -> None:
         self.settings = settings
         self.store = CCSStore(settings.store_path)
+        self.reliefs = ReliefCache()
         self.renderer = Renderer(
             self.store,
             TileOptions(

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from engine.ccsm.build import BuiltSet, build_contour_set
+from engine.io.dem import DEM_SUFFIXES
 from engine.io.source import read_source
 from engine.params import BuildParams
 from engine.serve.records import contour_rows, dataset_meta
@@ -57,6 +58,10 @@ class SourceSpec:
         Passed to ``read_source`` (a DEM needs ``interval``).
     source_scale, target_scale
         Scale denominators of t = 0 and t = 1.
+    relief_dem
+        A DEM to shade under the contours (docs/clients.md): the source itself when it is a DEM, or the DEM
+        contours were traced from (the bundled sample's). Stored with the dataset as a path; not part of the
+        content hash, since it changes no contour.
     """
 
     path: Path
@@ -66,6 +71,13 @@ class SourceSpec:
     interval: float | None = None
     source_scale: float = 50_000.0
     target_scale: float = 500_000.0
+    relief_dem: Path | None = None
+
+    def relief_path(self) -> Path | None:
+        """The DEM to shade under this source's contours, or None."""
+        if self.relief_dem is not None:
+            return self.relief_dem
+        return self.path if self.path.suffix.lower() in DEM_SUFFIXES else None
 
     def params(self) -> dict[str, Any]:
         """The parameters that decide the build (part of the content hash)."""
@@ -75,6 +87,19 @@ class SourceSpec:
             "source_scale": self.source_scale,
             "target_scale": self.target_scale,
         }
+
+
+#: Key of the stored params that holds the path of the DEM to shade (see SourceSpec.relief_dem).
+RELIEF_DEM_KEY = "relief_dem"
+
+
+def stored_params(spec: SourceSpec) -> dict[str, Any]:
+    """The parameters stored with a dataset built from ``spec``: the build's, plus the relief DEM's path."""
+    params = spec.params()
+    relief = spec.relief_path()
+    if relief is not None:
+        params[RELIEF_DEM_KEY] = str(relief.resolve())
+    return params
 
 
 def slugify(text: str) -> str:
@@ -192,7 +217,7 @@ def build_dataset(
         name=spec.name,
         source=spec.path.name,
         digest=digest,
-        params=spec.params(),
+        params=stored_params(spec),
         workers=workers,
         progress=progress,
     )
