@@ -18,7 +18,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.errors import add_exception_handlers
 from app.lifespan import lifespan
-from app.routes import datasets, hillshade, meta, simplify, tiles
+from app.routes import datasets, hillshade, meta, simplify, styles, tiles
 from app.settings import Settings
 
 DESCRIPTION = """
@@ -76,6 +76,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     add_exception_handlers(app)
     app.include_router(tiles.router)
     app.include_router(hillshade.router)
+    app.include_router(styles.router)
     app.include_router(simplify.router)
     app.include_router(datasets.router)
     app.include_router(meta.router)

@@ -40,7 +40,8 @@ class ShadedRelief:
     Attributes
     ----------
     shade
-        (rows, cols) float32 brightness in [0, 1]; NaN where the DEM has no data.
+        (rows, cols) float32 brightness in [0, 1] (1 on flat ground and slopes facing the light); NaN where
+        the DEM has no data.
     transform
         (a, b, c, d, e, f) GDAL geotransform of the grid (pixel edges), in ``crs``.
     crs
@@ -57,7 +58,8 @@ def shade_relief(
     transform: tuple[float, float, float, float, float, float],
     crs: str,
 ) -> ShadedRelief:
-    """Shade a DEM: brightness = cos of the angle between the light and the ground's normal (clipped at 0).
+    """Shade a DEM: the cosine of the angle between the light and the ground's normal, divided by its value on
+    flat ground and clipped to [0, 1].
 
     Parameters
     ----------
@@ -93,7 +95,9 @@ def shade_relief(
     aspect = np.arctan2(-dz_dx, -dz_dy)  # the direction the ground faces, clockwise from north
     zenith = math.radians(90.0 - LIGHT_ALTITUDE_DEG)
     azimuth = math.radians(LIGHT_AZIMUTH_DEG)
-    shade = math.cos(zenith) * np.cos(slope) + math.sin(zenith) * np.sin(slope) * np.cos(azimuth - aspect)
+    lit = math.cos(zenith) * np.cos(slope) + math.sin(zenith) * np.sin(slope) * np.cos(azimuth - aspect)
+    # Scaled so that flat ground is white: only slopes turned from the light darken the paper under the lines.
+    shade = lit / math.cos(zenith)
     shade = np.where(np.isnan(z), np.nan, np.clip(shade, 0.0, 1.0))  # central differences skip the cell itself
     return ShadedRelief(shade.astype(np.float32), transform, crs)
 
