@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from html import escape
 from typing import Annotated, Any
 from urllib.parse import urlencode
 
@@ -13,7 +14,8 @@ from app.dependencies import TileQuery, get_service, get_settings
 from app.responses import accepts_gzip, body_response, etag_matches, make_etag
 from app.service import DatasetService, lonlat_bounds
 from app.settings import Settings
-from engine.serve.renderer import MORPH_END_LAYER, MORPH_START_LAYER, MORPH_T_SAMPLES
+from engine.cartography.dataset import contour_fields, label_fields
+from engine.serve.renderer import LABEL_LAYER, MORPH_END_LAYER, MORPH_START_LAYER, MORPH_T_SAMPLES
 from engine.tiles.grid import check_tile
 from engine.tiles.scale import zoom_for_scale
 
@@ -170,9 +172,9 @@ def tilejson_response(
             max(settings.min_zoom, round(float(zoom_for_scale(info.source_scale, lat)) - 1)),
         )
     )
+    carto = service.renderer.cartography(dataset)
     fields = {
-        "elevation": "Number: height of the contour",
-        "index": f"Boolean: true on every 5th interval ({5 * interval:g})" if interval else "Boolean",
+        **contour_fields(carto),
         "t": "Number: generalization parameter in [0, 1] (0 = source detail)",
     }
     layers: list[dict[str, Any]] = [
@@ -182,14 +184,21 @@ def tilejson_response(
             "minzoom": settings.min_zoom,
             "maxzoom": settings.max_zoom,
             "fields": fields,
-        }
+        },
+        {
+            "id": LABEL_LAYER,
+            "description": "Label anchors on index contours, fixed per contour (they hold still while lines morph).",
+            "minzoom": settings.min_zoom,
+            "maxzoom": settings.max_zoom,
+            "fields": label_fields(carto),
+        },
     ]
     body: dict[str, Any] = {
         "tilejson": "3.0.0",
         "name": info.name,
         "description": "Terrain contours generalized continuously with the zoom (CCSM, Qian et al. 2021).",
-        "version": "1.0.0",
-        "attribution": "Contours: ccsm",
+        "version": f"1.{version}.0",  # changes with the dataset's data version
+        "attribution": escape(carto.options.attribution or f"Contours: ccsm, from {info.source}"),
         "scheme": "xyz",
         "tiles": [url],
         "minzoom": settings.min_zoom,
@@ -198,17 +207,19 @@ def tilejson_response(
         "center": [round((bounds[0] + bounds[2]) / 2, 6), round(lat, 6), start_zoom],
         "vector_layers": layers,
         "data_version": version,
+        "ccsm_cartography": carto.as_json(),
     }
     if kind == "morph":
         fields.update(MORPH_FIELDS)
-        layers.append(
+        layers.insert(
+            1,
             {
                 "id": MORPH_END_LAYER,
                 "description": "The same contours with the same vertices, as at zoom z + 1.",
                 "minzoom": settings.min_zoom,
                 "maxzoom": settings.max_zoom,
                 "fields": {},
-            }
+            },
         )
         body["ccsm_morph"] = MORPH_TILEJSON
     etag = make_etag("tilejson", dataset, version, str(request.url))

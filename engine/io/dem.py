@@ -349,3 +349,50 @@ def _close_touching_rings(
         return uv, counts
     uv = np.insert(uv, ends[touching], uv[starts[touching]], axis=0)
     return uv, counts + touching.astype(np.int64)
+
+
+#: Unit names a raster's metadata may use for its heights.
+_UNIT_NAMES = {
+    "m": "m",
+    "metre": "m",
+    "meter": "m",
+    "metres": "m",
+    "meters": "m",
+    "ft": "ft",
+    "foot": "ft",
+    "feet": "ft",
+    "us survey foot": "ft",
+    "foot_us": "ft",
+    "us-ft": "ft",
+    "ftus": "ft",
+}
+
+
+def dem_vertical_units(path: str | os.PathLike[str]) -> str | None:
+    """The vertical unit of a DEM from its metadata ("m" or "ft"), or None when it says none.
+
+    The band's unit (GDAL's ``units``) wins; otherwise the axis unit of the vertical part of a compound CRS.
+    An ``.npz`` grid has no metadata: None.
+
+    Raises
+    ------
+    SourceError
+        The raster cannot be read.
+    """
+    path = Path(path)
+    if path.suffix.lower() in NPZ_SUFFIXES:
+        return None
+    try:
+        with rasterio.open(path) as src:
+            band_unit = (src.units or (None,))[0]
+            wkt = src.crs.to_wkt() if src.crs is not None else None
+    except RasterioError as exc:
+        raise SourceError(f"{path}: cannot read DEM ({exc})") from exc
+    if band_unit and band_unit.strip().lower() in _UNIT_NAMES:
+        return _UNIT_NAMES[band_unit.strip().lower()]
+    if wkt:
+        crs = pyproj.CRS.from_wkt(wkt)
+        vertical = [c for c in crs.sub_crs_list if c.is_vertical] if crs.is_compound else []
+        if vertical and vertical[0].axis_info:
+            return _UNIT_NAMES.get(vertical[0].axis_info[0].unit_name.strip().lower())
+    return None

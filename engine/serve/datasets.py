@@ -11,10 +11,12 @@ import json
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from engine.cartography.options import PARAMS_KEY, CartographyOptions
+from engine.cartography.units import source_units
 from engine.ccsm.build import BuiltSet, build_contour_set
 from engine.io.dem import DEM_SUFFIXES
 from engine.io.source import read_source
@@ -42,6 +44,10 @@ def source_hash(
     return h.hexdigest()
 
 
+#: Key of the stored params that holds the path of the DEM to shade (see SourceSpec.relief_dem).
+RELIEF_DEM_KEY = "relief_dem"
+
+
 @dataclass(frozen=True)
 class SourceSpec:
     """A source to build into the store and how to read it.
@@ -58,6 +64,9 @@ class SourceSpec:
         Passed to ``read_source`` (a DEM needs ``interval``).
     source_scale, target_scale
         Scale denominators of t = 0 and t = 1.
+    cartography
+        Units, index contours, attribute names and schedule override (docs/design.md section 9); None for the
+        defaults (units then as the source states them, else metres).
     relief_dem
         A DEM to shade under the contours (docs/clients.md): the source itself when it is a DEM, or the DEM
         contours were traced from (the bundled sample's). Stored with the dataset as a path; not part of the
@@ -71,6 +80,7 @@ class SourceSpec:
     interval: float | None = None
     source_scale: float = 50_000.0
     target_scale: float = 500_000.0
+    cartography: CartographyOptions | None = None
     relief_dem: Path | None = None
 
     def relief_path(self) -> Path | None:
@@ -81,25 +91,28 @@ class SourceSpec:
 
     def params(self) -> dict[str, Any]:
         """The parameters that decide the build (part of the content hash)."""
-        return {
+        params: dict[str, Any] = {
             "elevation_field": self.elevation_field,
             "interval": self.interval,
             "source_scale": self.source_scale,
             "target_scale": self.target_scale,
         }
+        if self.cartography is not None:
+            params[PARAMS_KEY] = self.cartography.checked().as_params()
+        return params
 
-
-#: Key of the stored params that holds the path of the DEM to shade (see SourceSpec.relief_dem).
-RELIEF_DEM_KEY = "relief_dem"
-
-
-def stored_params(spec: SourceSpec) -> dict[str, Any]:
-    """The parameters stored with a dataset built from ``spec``: the build's, plus the relief DEM's path."""
-    params = spec.params()
-    relief = spec.relief_path()
-    if relief is not None:
-        params[RELIEF_DEM_KEY] = str(relief.resolve())
-    return params
+    def stored_params(self) -> dict[str, Any]:
+        """The parameters as stored with the dataset: :meth:`params` with the vertical unit resolved (given,
+        else as the source states it, else metres), and the path of the DEM to shade (``relief_dem``), if any."""
+        options = (self.cartography or CartographyOptions()).checked()
+        if options.units is None:
+            units = source_units(self.path, self.elevation_field) or "m"
+            options = replace(options, units=units)
+        stored = {**self.params(), PARAMS_KEY: options.as_params()}
+        relief = self.relief_path()
+        if relief is not None:
+            stored[RELIEF_DEM_KEY] = str(relief.resolve())
+        return stored
 
 
 def slugify(text: str) -> str:
@@ -209,6 +222,7 @@ def build_dataset(
     if not force and store.source_hash_of(spec.dataset) == digest:
         return store.dataset(spec.dataset), False
     BuildParams(source_scale=spec.source_scale, target_scale=spec.target_scale)  # bad scales fail before reading
+    params = spec.stored_params()  # bad cartography options fail before reading too
     contour_set = read_source(spec.path, elevation_field=spec.elevation_field, interval=spec.interval)
     info = build_and_save(
         store,
@@ -217,7 +231,7 @@ def build_dataset(
         name=spec.name,
         source=spec.path.name,
         digest=digest,
-        params=stored_params(spec),
+        params=params,
         workers=workers,
         progress=progress,
     )

@@ -17,14 +17,23 @@ from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
+from html import escape
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from engine.cartography.dataset import DatasetCartography, contour_fields, label_fields
 from engine.ccsm.build import default_workers
 from engine.errors import InvalidParameter, StoreError
-from engine.serve.renderer import MORPH_END_LAYER, MORPH_START_LAYER, MORPH_T_SAMPLES, Renderer, TileOptions
+from engine.serve.renderer import (
+    LABEL_LAYER,
+    MORPH_END_LAYER,
+    MORPH_START_LAYER,
+    MORPH_T_SAMPLES,
+    Renderer,
+    TileOptions,
+)
 from engine.store.sqlite import CCSStore, DatasetInfo
 from engine.tiles.archives import ArchiveMeta, archive_format, open_archive, tile_id
 from engine.tiles.grid import Tile, mercator_to_lonlat, tiles_covering
@@ -95,11 +104,11 @@ def lonlat_bounds(info: DatasetInfo) -> tuple[float, float, float, float]:
     return (round(float(lon[0]), 7), round(float(lat[0]), 7), round(float(lon[1]), 7), round(float(lat[1]), 7))
 
 
-def morph_vector_layers(minzoom: int, maxzoom: int, interval: float | None) -> list[dict[str, Any]]:
-    """TileJSON ``vector_layers`` of morph tiles: ``contours`` with its fields, ``contours_end`` without."""
+def morph_vector_layers(minzoom: int, maxzoom: int, carto: DatasetCartography) -> list[dict[str, Any]]:
+    """TileJSON ``vector_layers`` of morph tiles: ``contours`` with its fields, ``contours_end`` without,
+    ``contour_labels`` with its fields."""
     fields = {
-        "elevation": "Number: height of the contour",
-        "index": f"Boolean: true on every 5th interval ({5 * interval:g})" if interval else "Boolean",
+        **contour_fields(carto),
         "t": "Number: generalization parameter at the tile's zoom z (0 = source detail, 1 = the target)",
         **{f"t{k}": f"Number: t at zoom z + {k}/{MORPH_T_SAMPLES}" for k in range(1, MORPH_T_SAMPLES + 1)},
         "min_zoom": "Number: draw the contour only where zoom > min_zoom (absent: the whole level)",
@@ -119,10 +128,17 @@ def morph_vector_layers(minzoom: int, maxzoom: int, interval: float | None) -> l
             "maxzoom": maxzoom,
             "fields": {},
         },
+        {
+            "id": LABEL_LAYER,
+            "description": "Label anchors on index contours, fixed per contour (they hold still while lines morph).",
+            "minzoom": minzoom,
+            "maxzoom": maxzoom,
+            "fields": label_fields(carto),
+        },
     ]
 
 
-def archive_meta(info: DatasetInfo, interval: float | None, minzoom: int, maxzoom: int) -> ArchiveMeta:
+def archive_meta(info: DatasetInfo, carto: DatasetCartography, minzoom: int, maxzoom: int) -> ArchiveMeta:
     """The archive metadata of an export: bounds, centre, layers, ``ccsm_morph`` and the dataset's provenance."""
     bounds = lonlat_bounds(info)
     lat = (bounds[1] + bounds[3]) / 2
@@ -131,14 +147,15 @@ def archive_meta(info: DatasetInfo, interval: float | None, minzoom: int, maxzoo
     return ArchiveMeta(
         name=info.name,
         description=DESCRIPTION,
-        attribution=ATTRIBUTION,
+        attribution=escape(carto.options.attribution or f"{ATTRIBUTION}, from {info.source}"),
         minzoom=minzoom,
         maxzoom=maxzoom,
         bounds=bounds,
         center=center,
-        vector_layers=morph_vector_layers(minzoom, maxzoom, interval),
+        vector_layers=morph_vector_layers(minzoom, maxzoom, carto),
         extra={
             "ccsm_morph": dict(CCSM_MORPH),
+            "ccsm_cartography": carto.as_json(),
             "ccsm": {
                 "dataset": info.id,
                 "data_version": info.data_version,
@@ -250,7 +267,7 @@ def export_dataset(
     fmt = archive_format(out)
     minzoom, maxzoom = check_zoom_range(minzoom, maxzoom)
     renderer = Renderer(CCSStore(store_path, readonly=True))
-    info, interval = renderer.info(dataset)
+    info, _ = renderer.info(dataset)
     tiles = pyramid(info.bounds_3857, minzoom, maxzoom)
     workers = default_workers() if workers is None else max(1, workers)
     workers = min(workers, max(1, len(tiles)))
@@ -281,7 +298,7 @@ def export_dataset(
         finally:
             if pool is not None:
                 pool.shutdown(wait=True, cancel_futures=True)
-        size = archive.commit(archive_meta(info, interval, minzoom, maxzoom))
+        size = archive.commit(archive_meta(info, renderer.cartography(dataset), minzoom, maxzoom))
     except BaseException:
         archive.abort()
         raise

@@ -20,6 +20,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from engine.cartography.dataset import DatasetCartography, dataset_cartography, label_columns, label_sources
+from engine.cartography.labels import LabelAnchors, place_labels
 from engine.ccsm.regression import t_at_scales
 from engine.checks import check_method, check_t
 from engine.intervals import infer_interval
@@ -29,7 +31,7 @@ from engine.serve.pack import PACK_BYTES_PER_VERTEX, DatasetPack
 from engine.store.sqlite import CCSStore, ContourRecord, DatasetInfo
 from engine.tiles.clip import clip_lines_fast
 from engine.tiles.grid import Tile, buffered, check_fractional_zoom, check_tile, tile_bounds, tile_center_latitude
-from engine.tiles.mvt import encode_line_tile
+from engine.tiles.mvt import encode_line_tile, encode_point_tile
 from engine.tiles.runs import morph_runs, ranges, slice_runs
 from engine.tiles.scale import scale_for_zoom, zoom_for_scale
 from engine.types import Bounds
@@ -42,6 +44,10 @@ MORPH_T_SAMPLES = 8
 #: Layers of a morph tile: the contours as at zoom z, and the same vertices as at zoom z + 1.
 MORPH_START_LAYER = "contours"
 MORPH_END_LAYER = "contours_end"
+#: The point layer of contour labels in tiles and morph tiles (docs/design.md section 9.3).
+LABEL_LAYER = "contour_labels"
+#: Contours read from the store at a time while label anchors are placed.
+LABEL_BATCH = 512
 
 
 @dataclass(frozen=True)
@@ -109,6 +115,8 @@ class Renderer:
         self.contour_cache_bytes = contour_cache_bytes
         self._info: dict[str, tuple[DatasetInfo, float | None]] = {}
         self._packs: dict[str, DatasetPack] = {}
+        self._cartography: dict[str, tuple[int, DatasetCartography]] = {}
+        self._labels: dict[str, tuple[int, LabelAnchors]] = {}
         self._pack_lock = threading.Lock()
 
     # -- datasets ----------------------------------------------------------------------------------------
@@ -133,6 +141,19 @@ class Renderer:
         """Drop cached metadata of a dataset (after a delete or rebuild; contour rows get new fids anyway)."""
         self._info.pop(dataset, None)
         self._packs.pop(dataset, None)
+        self._cartography.pop(dataset, None)
+        self._labels.pop(dataset, None)
+
+    def cartography(self, dataset: str) -> DatasetCartography:
+        """The dataset's options, interval schedule and label anchors, made once per data version
+        (docs/design.md section 9)."""
+        info, interval = self.info(dataset)
+        cached = self._cartography.get(dataset)
+        if cached is not None and cached[0] == info.data_version:
+            return cached[1]
+        carto = dataset_cartography(info, interval, self.store.elevations(dataset))
+        self._cartography[dataset] = (info.data_version, carto)
+        return carto
 
     def pack(self, dataset: str) -> DatasetPack | None:
         """The dataset's contours packed (built once per data version), or None when the dataset is larger
@@ -175,6 +196,44 @@ class Renderer:
         info, interval = self.info(dataset)
         recs = self.records(fids)
         return DatasetPack.of(info.data_version, recs, interval), np.arange(len(recs))
+
+    def labels(self, dataset: str) -> LabelAnchors:
+        """The dataset's label anchors on index contours, placed once per data version (docs/design.md
+        section 9.3)."""
+        info, _ = self.info(dataset)
+        cached = self._labels.get(dataset)
+        if cached is not None and cached[0] == info.data_version:
+            return cached[1]
+        carto = self.cartography(dataset)
+        with self._pack_lock:
+            cached = self._labels.get(dataset)
+            if cached is not None and cached[0] == info.data_version:
+                return cached[1]
+            fids = self.store.all_fids(dataset)
+            sources = []
+            for k in range(0, len(fids), LABEL_BATCH):
+                sources.extend(label_sources(carto, self.store.load(fids[k : k + LABEL_BATCH])))
+            anchors = place_labels(sources, info.ladder, carto.latitude, float(self.options.max_zoom) + 1)
+            self._labels[dataset] = (info.data_version, anchors)
+        return anchors
+
+    def label_layer(self, dataset: str, tile: Tile) -> bytes:
+        """The ``contour_labels`` layer of a tile: labels shown somewhere in [z, z + 1) whose anchor lies in
+        the tile (each label in exactly one tile per zoom); b"" when none."""
+        labels = self.labels(dataset)
+        if len(labels) == 0:
+            return b""
+        b = tile_bounds(tile)
+        extent = self.options.extent
+        gx = np.floor((labels.xy[:, 0] - b.minx) / (b.maxx - b.minx) * extent).astype(np.int64)
+        gy = np.floor((b.maxy - labels.xy[:, 1]) / (b.maxy - b.miny) * extent).astype(np.int64)
+        inside = (gx >= 0) & (gx < extent) & (gy >= 0) & (gy < extent) & (labels.min_zoom < tile.z + 1)
+        if not inside.any():
+            return b""
+        chosen = labels.select(inside)
+        columns = label_columns(self.cartography(dataset), chosen)
+        pts = np.column_stack([gx[inside], gy[inside]])
+        return encode_point_tile(LABEL_LAYER, chosen.fid.tolist(), columns, pts, extent)
 
     # -- tiles -------------------------------------------------------------------------------------------
     def method(self, name: str) -> Method:
@@ -240,7 +299,9 @@ class Renderer:
         if not fids:
             return TileResult(None, 0, zoomf, scale)
         pack, where = self.packed(dataset, fids)
+        carto = self.cartography(dataset)
         idx = how.visible(pack, where, scale)
+        idx = idx[carto.shown_in_tile(pack.elevation[idx], z)]
         if len(idx) == 0:
             return TileResult(None, 0, zoomf, scale)
         if how.honours_t and t_pin is not None:
@@ -254,16 +315,12 @@ class Renderer:
         if parts is None:
             return TileResult(None, 0, zoomf, scale)
         cs = idx[parts.owner]
-        columns = {
-            "elevation": pack.elevation[cs].tolist(),
-            "index": pack.index[cs].tolist(),
-            "t": [round(v, T_DECIMALS) for v in ts[parts.owner].tolist()],
-        }
+        columns = line_columns(carto, pack.elevation[cs], [round(v, T_DECIMALS) for v in ts[parts.owner].tolist()])
         opts = self.options
         data = encode_line_tile(
             opts.layer, pack.fid[cs].tolist(), columns, parts.pts, parts.part_len, parts.part_count, opts.extent
         )
-        return TileResult(data, len(cs), zoomf, scale)
+        return TileResult(data + self.label_layer(dataset, tile), len(cs), zoomf, scale)
 
     def morph_tile(self, dataset: str, z: int, x: int, y: int) -> TileResult:
         """A morph tile: the CCSM contours at zoom ``z`` and at ``z + 1`` with the same vertices, and their t at
@@ -284,7 +341,9 @@ class Renderer:
         if not fids:
             return TileResult(None, 0, float(z), float(scales[0]))
         pack, where = self.packed(dataset, fids)
+        carto = self.cartography(dataset)
         idx = where[scales[-1] < pack.vanish[where]]  # drawn somewhere in the level: at its finest end
+        idx = idx[carto.shown_in_tile(pack.elevation[idx], z)]
         if len(idx) == 0:
             return TileResult(None, 0, float(z), float(scales[0]))
         ts = np.stack([t_at_scales(info.ladder, pack.tables[idx], float(s)) for s in scales])  # (9, n)
@@ -317,18 +376,15 @@ class Renderer:
         finite = np.isfinite(vanish)  # an infinite vanishing scale: a line that never goes
         appear = np.zeros(len(cs))
         appear[finite] = np.maximum(zoom_for_scale(vanish[finite], lat), 0.0)
-        columns: dict[str, list[Any]] = {
-            "elevation": pack.elevation[cs].tolist(),
-            "index": pack.index[cs].tolist(),
-            "t": np.round(ts[0][owners], T_DECIMALS).tolist(),
-        }
+        columns = line_columns(carto, pack.elevation[cs], np.round(ts[0][owners], T_DECIMALS).tolist())
         for k in range(1, MORPH_T_SAMPLES + 1):
             columns[f"t{k}"] = np.round(ts[k][owners], T_DECIMALS).tolist()
         columns["min_zoom"] = np.round(appear, T_DECIMALS).tolist()
         ids = pack.fid[cs].tolist()
         start = encode_line_tile(MORPH_START_LAYER, ids, columns, q0, part_len, counts, opts.extent)
         end = encode_line_tile(MORPH_END_LAYER, ids, {}, q1, part_len, counts, opts.extent)
-        return TileResult(start + end, len(cs), float(z), float(scales[0]))
+        labels = self.label_layer(dataset, tile)
+        return TileResult(start + end + labels, len(cs), float(z), float(scales[0]))
 
     def min_significance(self, box: Bounds) -> float:
         """Rows less significant than half a grid unit cannot move the quantised line (tiles.significance)."""
@@ -385,6 +441,18 @@ class Renderer:
         pts = all_pts[ranges(part_start, part_start + part_len)]
         owners, counts = np.unique(part_owner, return_counts=True)
         return TileParts(pts, part_len, counts, owners)
+
+
+def line_columns(carto: DatasetCartography, elevations: NDArray[np.float64], ts: list[float]) -> dict[str, Any]:
+    """The properties of contour features: elevation, index, t, then the cartography attributes (level, rank,
+    fade_zoom, hide_zoom; docs/design.md section 9)."""
+    cols = carto.line_columns(elevations)
+    out: dict[str, Any] = {}
+    for key in (carto.options.elevation_key, "index"):
+        out[key] = cols.pop(key)
+    out["t"] = ts
+    out.update(cols)
+    return out
 
 
 def runs_meeting(

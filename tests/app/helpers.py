@@ -24,12 +24,12 @@ def lines_of(geometry: dict) -> list[list[list[int]]]:
 def check_tile(data: bytes) -> list[dict]:
     """Decode an MVT and check the contract: layer, properties, ids, coordinates within the buffer."""
     tile = decode(data)
-    assert list(tile) == ["contours"]
+    assert list(tile) in (["contours"], ["contours", "contour_labels"])
     layer = tile["contours"]
     assert layer["extent"] == EXTENT
     ids = set()
     for f in layer["features"]:
-        assert set(f["properties"]) == {"elevation", "index", "t"}
+        assert set(f["properties"]) == {"elevation", "index", "t", "level", "rank", "fade_zoom", "hide_zoom"}
         assert isinstance(f["properties"]["index"], bool)
         assert 0.0 <= f["properties"]["t"] <= 1.0
         assert isinstance(f["id"], int) and f["id"] not in ids

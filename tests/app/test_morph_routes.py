@@ -70,7 +70,7 @@ def test_morph_tilejson(client):
     body = client.get("/morph/hills/tilejson.json").json()
     assert body["tilejson"] == "3.0.0"
     assert "/morph/hills/{z}/{x}/{y}.mvt?" in body["tiles"][0]
-    assert [layer["id"] for layer in body["vector_layers"]] == ["contours", "contours_end"]
+    assert [layer["id"] for layer in body["vector_layers"]] == ["contours", "contours_end", "contour_labels"]
     assert {"t1", "t8", "min_zoom"} <= set(body["vector_layers"][0]["fields"])
     assert body["ccsm_morph"] == {
         "version": 1,

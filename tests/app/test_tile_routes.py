@@ -254,8 +254,13 @@ def test_tilejson(client):
     assert w < LON0 < e and s < LAT0 < n
     assert tj["minzoom"] == 0 and tj["maxzoom"] == 16
     assert tj["center"][2] >= tj["minzoom"]
-    (layer,) = tj["vector_layers"]
-    assert layer["id"] == "contours" and set(layer["fields"]) == {"elevation", "index", "t"}
+    layer, labels = tj["vector_layers"]
+    assert layer["id"] == "contours"
+    assert set(layer["fields"]) == {"elevation", "index", "t", "level", "rank", "fade_zoom", "hide_zoom"}
+    assert labels["id"] == "contour_labels"
+    assert set(labels["fields"]) == {
+        "elevation", "label", "angle", "level", "rank", "fade_zoom", "hide_zoom", "min_zoom"
+    }
 
 
 def test_raw_gzip_bytes_are_valid(client):

@@ -1,0 +1,177 @@
+"""A stored dataset's cartography: its options, schedule and the attributes its tile features carry
+(docs/design.md section 9)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from engine.cartography.labels import LabelAnchors, LabelSource, first_label_zoom
+from engine.cartography.options import CartographyOptions
+from engine.cartography.schedule import ZOOM_DECIMALS, Schedule, make_schedule
+from engine.store.sqlite import ContourRecord, DatasetInfo
+from engine.tiles.grid import mercator_to_lonlat
+from engine.tiles.scale import zoom_for_scale
+
+
+@dataclass(frozen=True)
+class DatasetCartography:
+    """What tiles of one dataset version need to draw its contours as a map reader expects.
+
+    Attributes
+    ----------
+    options
+        The dataset's options, ``units`` resolved ("m" when neither given nor found in the source).
+    schedule
+        Its interval schedule (zooms at ``latitude``).
+    latitude
+        Degrees, the centre of the dataset's extent.
+    start_zoom
+        Zoom of the dataset's source scale at ``latitude`` (every level is drawn from there in).
+    """
+
+    options: CartographyOptions
+    schedule: Schedule
+    latitude: float
+    start_zoom: float
+
+    def shown_in_tile(self, elevations: ArrayLike, z: int) -> NDArray[np.bool_]:
+        """Which contours a tile of zoom ``z`` carries: those not fully faded somewhere in [z, z + 1)."""
+        _, hide = self.schedule.zooms_of(self.schedule.rank_of(elevations))
+        return np.asarray(hide < z + 1, dtype=bool)
+
+    def line_columns(self, elevations: NDArray[np.float64]) -> dict[str, list[Any]]:
+        """The cartography attributes of contour features: elevation (named per the options), index, level,
+        rank, fade_zoom and hide_zoom, in that order (``t`` is the renderer's)."""
+        ranks = self.schedule.rank_of(elevations)
+        levels = self.schedule.level_of(elevations)
+        fade, hide = self.schedule.zooms_of(ranks)
+        return {
+            self.options.elevation_key: elevations.tolist(),
+            "index": (levels == 1).tolist(),
+            "level": levels.tolist(),
+            "rank": ranks.tolist(),
+            "fade_zoom": fade.tolist(),
+            "hide_zoom": hide.tolist(),
+        }
+
+    def label_text(self, elevation: float) -> str:
+        """A contour label: the elevation and its unit ("600 m", "2000 ft"; decimals only when needed)."""
+        return f"{elevation:g} {self.options.units}"
+
+    def as_json(self) -> dict[str, Any]:
+        """TileJSON's ``ccsm_cartography`` object."""
+        return {
+            "units": self.options.units,
+            "index_every": self.options.index_every,
+            "base_interval": self.schedule.base_interval,
+            "attribute_names": self.options.attribute_names,
+            "start_zoom": self.start_zoom,
+            "schedule": self.schedule.as_json(),
+        }
+
+
+def centre_latitude(info: DatasetInfo) -> float:
+    """Latitude of the centre of a dataset's extent, degrees (within Web Mercator's range)."""
+    minx, miny, maxx, maxy = info.bounds_3857
+    _, lat = mercator_to_lonlat(np.array([(minx + maxx) / 2]), np.array([(miny + maxy) / 2]))
+    return float(np.clip(lat[0], -85.05, 85.05))
+
+
+def dataset_cartography(info: DatasetInfo, interval: float | None, elevations: ArrayLike) -> DatasetCartography:
+    """The cartography of a stored dataset from its metadata, interval and levels.
+
+    Raises
+    ------
+    InvalidParameter
+        Its stored options or schedule override are invalid.
+    """
+    options = CartographyOptions.from_params(info.params).checked()
+    if options.units is None:
+        options = replace(options, units="m")
+    lat = centre_latitude(info)
+    schedule = make_schedule(
+        interval,
+        start_scale=info.source_scale,
+        latitude=lat,
+        units=options.units or "m",
+        index_every=options.index_every,
+        elevations=elevations,
+        override=options.schedule,
+    )
+    start = round(float(zoom_for_scale(info.source_scale, lat)), ZOOM_DECIMALS)
+    return DatasetCartography(options, schedule, lat, start)
+
+
+def label_sources(carto: DatasetCartography, records: Sequence[ContourRecord]) -> list[LabelSource]:
+    """The index contours among ``records``, as the label placement takes them."""
+    if not records:
+        return []
+    elevations = np.array([r.elevation for r in records])
+    levels = carto.schedule.level_of(elevations)
+    ranks = carto.schedule.rank_of(elevations)
+    out = []
+    for rec, level, rank in zip(records, levels.tolist(), ranks.tolist(), strict=True):
+        if level != 1:
+            continue
+        label_zoom = carto.schedule.label_zoom(rank, carto.start_zoom)
+        out.append(
+            LabelSource(
+                fid=rec.fid,
+                elevation=float(rec.elevation),
+                text=carto.label_text(float(rec.elevation)),
+                rank=rank,
+                base=rec.base,
+                top=rec.top,
+                t_at_scale=rec.t_at_scale,
+                first_zoom=first_label_zoom(label_zoom, rec.vanish_scale, carto.latitude),
+            )
+        )
+    return out
+
+
+def label_columns(carto: DatasetCartography, labels: LabelAnchors) -> dict[str, list[Any]]:
+    """The properties of ``contour_labels`` features: elevation (named per the options), label, angle, level,
+    rank, fade_zoom, hide_zoom (of the contour) and min_zoom (where the label is first shown)."""
+    fade, hide = carto.schedule.zooms_of(labels.rank)
+    return {
+        carto.options.elevation_key: labels.elevation.tolist(),
+        "label": list(labels.text),
+        "angle": np.round(labels.angle, 1).tolist(),
+        "level": carto.schedule.level_of(labels.elevation).tolist(),
+        "rank": labels.rank.tolist(),
+        "fade_zoom": fade.tolist(),
+        "hide_zoom": hide.tolist(),
+        "min_zoom": np.round(labels.min_zoom, ZOOM_DECIMALS).tolist(),
+    }
+
+
+def contour_fields(carto: DatasetCartography) -> dict[str, str]:
+    """TileJSON ``fields`` of the ``contours`` layer (before the renderer's ``t`` and the morph fields)."""
+    s = carto.schedule
+    return {
+        carto.options.elevation_key: f"Number: height of the contour, {carto.options.units}",
+        "index": f"Boolean: true on index contours (multiples of {s.index_every * s.base_interval:g})",
+        "level": "Number: 1 on index contours, 0 on intermediate ones",
+        "rank": "Number: rank in the interval schedule (ccsm_cartography.schedule); higher ranks stay longer",
+        "fade_zoom": "Number: the line starts fading out below this zoom (-1: never)",
+        "hide_zoom": "Number: the line is fully faded at and below this zoom (-1: never)",
+    }
+
+
+def label_fields(carto: DatasetCartography) -> dict[str, str]:
+    """TileJSON ``fields`` of the ``contour_labels`` layer."""
+    return {
+        carto.options.elevation_key: f"Number: height of the labelled contour, {carto.options.units}",
+        "label": f"String: the label text, with its unit (e.g. '600 {carto.options.units}')",
+        "angle": "Number: text-rotate in degrees (clockwise, 0 = west to east, within [-90, 90])",
+        "level": "Number: 1 (labels sit on index contours)",
+        "rank": "Number: rank of the labelled contour",
+        "fade_zoom": "Number: fade_zoom of the labelled contour",
+        "hide_zoom": "Number: hide_zoom of the labelled contour",
+        "min_zoom": "Number: the label is placed to be shown from this zoom on (no overlap from there)",
+    }

@@ -1,0 +1,279 @@
+"""Label anchors on index contours: fixed points where a contour holds still and runs straight
+(docs/design.md section 9.3).
+
+A contour drawn at t is ``(1 - t) base + t top`` row by row, so the row i of the base line is off the drawn
+line by ``t * |top_i - base_i|``. Over the zooms a label is shown (from its first zoom to the last served
+zoom), a row whose offset stays under ``LabelStyle.max_drift_px`` on screen is a place where the label can
+sit still while the line morphs. Among such rows, a label goes where the line over the label's length is
+straight (chord / arc >= ``min_straightness``), at most one per ``spacing_px`` of line at the first zoom;
+then every contour's candidates are placed greedily (coarser ranks, then straighter places, first), each
+kept only if its screen box does not meet a kept one at the zoom both are first shown together.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from engine.ccsm.regression import t_at_scales
+from engine.tiles.scale import EARTH_RADIUS_M, TILE_SIZE_PX, scale_for_zoom, zoom_for_scale
+
+#: EPSG:3857 metres per pixel at zoom 0 (512 px tiles).
+MERCATOR_M_PER_PX_Z0 = 2 * math.pi * EARTH_RADIUS_M / TILE_SIZE_PX
+
+
+@dataclass(frozen=True)
+class LabelStyle:
+    """The screen geometry labels are placed for (pixels, as the map draws them).
+
+    ``char_px`` and ``height_px`` are the box of one character of the label font (about 12 px text with its
+    halo); ``padding_px`` is added around every box.
+    """
+
+    char_px: float = 7.0
+    height_px: float = 14.0
+    padding_px: float = 4.0
+    spacing_px: float = 600.0
+    max_drift_px: float = 1.0
+    min_straightness: float = 0.97
+    zoom_step: float = 0.5
+
+
+@dataclass(frozen=True)
+class LabelSource:
+    """One index contour to label: its CCS rows (EPSG:3857), t table and when its label is first shown."""
+
+    fid: int
+    elevation: float
+    text: str
+    rank: int
+    base: NDArray[np.float64]
+    top: NDArray[np.float64]
+    t_at_scale: NDArray[np.float64]
+    first_zoom: float
+
+
+@dataclass(frozen=True)
+class LabelAnchors:
+    """Placed labels, one entry each (arrays aligned).
+
+    Attributes
+    ----------
+    xy
+        (n, 2) EPSG:3857 anchor points.
+    angle
+        (n,) degrees for MapLibre's ``text-rotate``: clockwise, 0 = text runs west to east, in [-90, 90].
+    min_zoom
+        (n,) zoom from which the label is shown.
+    fid, rank
+        (n,) contour of each label and its rank.
+    elevation
+        (n,) its elevation.
+    text
+        The label texts.
+    box_px
+        (n, 2) width and height of each label's axis-aligned screen box (rotation included, padding included).
+    """
+
+    xy: NDArray[np.float64]
+    angle: NDArray[np.float64]
+    min_zoom: NDArray[np.float64]
+    fid: NDArray[np.int64]
+    rank: NDArray[np.int64]
+    elevation: NDArray[np.float64]
+    text: list[str]
+    box_px: NDArray[np.float64]
+
+    def __len__(self) -> int:
+        return len(self.fid)
+
+    def select(self, keep: NDArray[np.bool_] | NDArray[np.intp]) -> LabelAnchors:
+        """The labels chosen by a mask or positions."""
+        pos = np.flatnonzero(keep) if np.asarray(keep).dtype == np.bool_ else np.asarray(keep)
+        return LabelAnchors(
+            self.xy[pos],
+            self.angle[pos],
+            self.min_zoom[pos],
+            self.fid[pos],
+            self.rank[pos],
+            self.elevation[pos],
+            [self.text[i] for i in pos.tolist()],
+            self.box_px[pos],
+        )
+
+
+def metres_per_px(zoom: float | NDArray[np.float64]) -> NDArray[np.float64]:
+    """EPSG:3857 metres per screen pixel at a (fractional) zoom."""
+    return np.asarray(MERCATOR_M_PER_PX_Z0 / np.power(2.0, zoom), dtype=np.float64)
+
+
+def upright_angle(dx: NDArray[np.float64], dy: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``text-rotate`` degrees of a direction (dx east, dy north): clockwise, kept within [-90, 90].
+
+    >>> upright_angle(np.array([1.0, 0.0, -1.0, 1.0]), np.array([0.0, 1.0, 0.0, 1.0])).tolist()
+    [-0.0, -90.0, -0.0, -45.0]
+    """
+    a = -np.degrees(np.arctan2(dy, dx))  # screen y points down: a line rising to the east turns anticlockwise
+    a = np.where(a > 90, a - 180, a)
+    return np.where(a < -90, a + 180, a)
+
+
+def _t_through_zooms(
+    src: LabelSource, ladder: NDArray[np.float64], latitude: float, max_zoom: float, step: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Zooms from the label's first zoom to ``max_zoom`` every ``step``, and the contour's t at each."""
+    zooms = np.arange(src.first_zoom, max_zoom + step, step)
+    tables = src.t_at_scale[None, :]
+    ts = np.array([t_at_scales(ladder, tables, float(scale_for_zoom(z, latitude)))[0] for z in zooms])
+    return zooms, ts
+
+
+def _straightness(line: NDArray[np.float64], width: float) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Per row: chord / arc of the line over ``width`` metres of it centred at the row, and whether the window
+    lies wholly on the line."""
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(line, axis=0).T))])
+    lo = np.searchsorted(s, s - width / 2, side="left")
+    hi = np.searchsorted(s, s + width / 2, side="right") - 1
+    inside = (s - width / 2 >= 0) & (s + width / 2 <= s[-1]) & (hi > lo)
+    chord = np.hypot(*(line[hi] - line[lo]).T)
+    return chord / np.maximum(s[hi] - s[lo], 1e-9), inside
+
+
+def contour_candidates(
+    src: LabelSource, ladder: NDArray[np.float64], latitude: float, max_zoom: float, style: LabelStyle
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Candidate anchors of one contour: (k, 2) points, (k,) angles, (k,) straightness and (k,) first zooms.
+
+    A row qualifies from the first zoom (on the ``zoom_step`` grid from the contour's own first label zoom) from
+    which on, at every zoom: the drawn line stays within ``max_drift_px`` of the row and runs straight over the
+    label's length centred there (checked on the line as drawn at that zoom: generalized at small scales,
+    detailed further in). A curvy line is thus labelled from a larger scale on, where a label spans less of it.
+    """
+    empty = np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0)
+    base = np.asarray(src.base, dtype=np.float64)
+    top = np.asarray(src.top, dtype=np.float64)
+    if len(base) < 3:
+        return empty
+    zooms, ts = _t_through_zooms(src, ladder, latitude, max_zoom, style.zoom_step)
+    mpp = metres_per_px(zooms)
+    label_px = style.char_px * len(src.text) + 2 * style.padding_px
+    drift = np.hypot(*(top - base).T) * float(np.max(ts / mpp))
+    good = np.zeros((len(zooms), len(base)), dtype=bool)
+    ratio = np.zeros((len(zooms), len(base)))
+    for k in range(len(zooms)):
+        ratio[k], inside = _straightness((1 - ts[k]) * base + ts[k] * top, label_px * float(mpp[k]))
+        good[k] = inside & (ratio[k] >= style.min_straightness) & (drift <= style.max_drift_px)
+    # A row's first zoom: the first of a run of good zooms that lasts to the last zoom.
+    holds = np.flip(np.cumprod(np.flip(good, axis=0), axis=0), axis=0).astype(bool)
+    cand = np.flatnonzero(holds[-1])
+    if len(cand) == 0:
+        return empty
+    first_k = np.argmax(holds[:, cand], axis=0)
+    first = zooms[first_k]
+    score = ratio[first_k, cand]
+    # Greedy along the line (earlier-shown, then straighter, first): labels at least `spacing_px` of line
+    # apart at the zoom both show.
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(base, axis=0).T))])
+    chosen: list[int] = []
+    for j in np.lexsort((-score, first)).tolist():
+        i = cand[j]
+        if all(
+            abs(s[i] - s[cand[c]]) >= style.spacing_px * float(metres_per_px(max(first[j], first[c]))) for c in chosen
+        ):
+            chosen.append(j)
+    pick = np.array(sorted(chosen), dtype=np.intp)
+    rows = cand[pick]
+    width = label_px * metres_per_px(first[pick])
+    lo = np.searchsorted(s, s[rows] - width / 2, side="left")
+    hi = np.minimum(np.searchsorted(s, s[rows] + width / 2, side="right") - 1, len(base) - 1)
+    chord = base[hi] - base[lo]
+    return base[rows], upright_angle(chord[:, 0], chord[:, 1]), score[pick], first[pick]
+
+
+def box_px(text_len: NDArray[np.int64], angle_deg: NDArray[np.float64], style: LabelStyle) -> NDArray[np.float64]:
+    """(n, 2) width and height of each label's axis-aligned screen box, rotation and padding included."""
+    w = style.char_px * text_len + 2 * style.padding_px
+    h = style.height_px + 2 * style.padding_px
+    a = np.radians(angle_deg)
+    c, s = np.abs(np.cos(a)), np.abs(np.sin(a))
+    return np.column_stack([w * c + h * s, w * s + h * c])
+
+
+def boxes_overlap(
+    xy: NDArray[np.float64], box: NDArray[np.float64], zoom: NDArray[np.float64], j: int, others: NDArray[np.intp]
+) -> NDArray[np.bool_]:
+    """Whether label ``j``'s box meets each of ``others``' boxes at the zoom both are first shown together."""
+    mpp = metres_per_px(np.maximum(zoom[j], zoom[others]))
+    half = (box[j] + box[others]) / 2 * mpp[:, None]
+    d = np.abs(xy[others] - xy[j])
+    return (d[:, 0] < half[:, 0]) & (d[:, 1] < half[:, 1])
+
+
+def place_labels(
+    sources: Sequence[LabelSource],
+    ladder: NDArray[np.float64],
+    latitude: float,
+    max_zoom: float,
+    style: LabelStyle | None = None,
+) -> LabelAnchors:
+    """Anchors of every labelled contour of a dataset, none overlapping another at their first common zoom.
+
+    Parameters
+    ----------
+    sources
+        The contours to label (index contours), with their first zooms.
+    ladder
+        (S,) the dataset's scale ladder (of the t tables).
+    latitude
+        Degrees; zooms are turned into scales there.
+    max_zoom
+        The last zoom labels are shown at (the served maximum): drift is checked up to it.
+    """
+    style = style or LabelStyle()
+    pts, ang, score, zoom, owner = [], [], [], [], []
+    for k, src in enumerate(sources):
+        p, a, sc, fz = contour_candidates(src, ladder, latitude, max_zoom, style)
+        pts.append(p)
+        ang.append(a)
+        score.append(sc)
+        zoom.append(fz)
+        owner.append(np.full(len(p), k, dtype=np.int64))
+    if not sources or not sum(len(o) for o in owner):
+        z = np.zeros(0)
+        return LabelAnchors(
+            np.zeros((0, 2)), z, z, np.zeros(0, np.int64), np.zeros(0, np.int64), z, [], np.zeros((0, 2))
+        )
+    xy, angle, straight, own = np.concatenate(pts), np.concatenate(ang), np.concatenate(score), np.concatenate(owner)
+    first = np.concatenate(zoom)
+    rank = np.array([sources[k].rank for k in own.tolist()], dtype=np.int64)
+    texts = [sources[k].text for k in own.tolist()]
+    boxes = box_px(np.array([len(t) for t in texts]), angle, style)
+    # Labels shown from smaller scales first (coarser ranks first among them), then straighter places.
+    order = np.lexsort((-straight, -rank, first))
+    kept: list[int] = []
+    for j in order.tolist():
+        if not kept or not boxes_overlap(xy, boxes, first, j, np.array(kept, dtype=np.intp)).any():
+            kept.append(j)
+    placed = np.array(sorted(kept), dtype=np.intp)
+    return LabelAnchors(
+        xy[placed],
+        angle[placed],
+        first[placed],
+        np.array([sources[i].fid for i in own[placed].tolist()], dtype=np.int64),
+        rank[placed],
+        np.array([sources[i].elevation for i in own[placed].tolist()]),
+        [texts[i] for i in placed.tolist()],
+        boxes[placed],
+    )
+
+
+def first_label_zoom(label_zoom: float, vanish_scale: float, latitude: float) -> float:
+    """The zoom a contour's label first shows: its rank's label zoom, or later when the contour (a small ring)
+    is not drawn yet there."""
+    if math.isfinite(vanish_scale) and vanish_scale > 0:
+        return max(label_zoom, float(zoom_for_scale(vanish_scale, latitude)))
+    return label_zoom

@@ -1,0 +1,87 @@
+"""A dataset's cartography options (units, index contours, attribute names, schedule override), kept in its
+stored build parameters under ``cartography`` (docs/design.md section 9)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from engine.cartography.schedule import check_index_every, check_units, parse_schedule
+from engine.errors import InvalidParameter
+from engine.intervals import INDEX_EVERY
+
+#: Attribute naming conventions: ccsm's own (``elevation``) and maplibre-contour's (``ele``).
+ATTRIBUTE_NAMES = ("ccsm", "maplibre-contour")
+#: Key of the options in a dataset's stored parameters.
+PARAMS_KEY = "cartography"
+
+
+def check_attribute_names(value: object) -> str:
+    """``value`` if it is one of ATTRIBUTE_NAMES, else raise naming it."""
+    if isinstance(value, str) and value.strip().lower() in ATTRIBUTE_NAMES:
+        return value.strip().lower()
+    raise InvalidParameter(f"attribute_names must be one of {', '.join(ATTRIBUTE_NAMES)}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class CartographyOptions:
+    """How a dataset's contours are drawn and named.
+
+    Attributes
+    ----------
+    units
+        Vertical unit of the elevations, "m" or "ft" (None: not given, found from the source or metres).
+    index_every
+        Index contours are every n-th base interval.
+    attribute_names
+        "ccsm" (``elevation``) or "maplibre-contour" (``ele``).
+    schedule
+        Override table of the interval schedule (``STEP:HIDE_SCALE,...,STEP``), or None for the default rule.
+    attribution
+        Who made the data, for TileJSON (None: the source file's name).
+    """
+
+    units: str | None = None
+    index_every: int = INDEX_EVERY
+    attribute_names: str = "ccsm"
+    schedule: str | None = None
+    attribution: str | None = None
+
+    def checked(self) -> CartographyOptions:
+        """The same options, validated and normalised (raises InvalidParameter naming the bad one)."""
+        if self.schedule is not None:
+            parse_schedule(self.schedule)
+        return CartographyOptions(
+            None if self.units is None else check_units(self.units),
+            check_index_every(self.index_every),
+            check_attribute_names(self.attribute_names),
+            None if self.schedule is None else self.schedule.strip(),
+            self.attribution,
+        )
+
+    @property
+    def elevation_key(self) -> str:
+        """The name of the elevation attribute in tiles."""
+        return "ele" if self.attribute_names == "maplibre-contour" else "elevation"
+
+    def as_params(self) -> dict[str, Any]:
+        """The options as stored in a dataset's parameters."""
+        return {
+            "units": self.units,
+            "index_every": self.index_every,
+            "attribute_names": self.attribute_names,
+            "schedule": self.schedule,
+            "attribution": self.attribution,
+        }
+
+    @classmethod
+    def from_params(cls, params: dict[str, Any]) -> CartographyOptions:
+        """The options stored in a dataset's parameters (defaults for a dataset stored without them)."""
+        stored = params.get(PARAMS_KEY) or {}
+        return cls(
+            units=stored.get("units"),
+            index_every=int(stored.get("index_every") or INDEX_EVERY),
+            attribute_names=stored.get("attribute_names") or "ccsm",
+            schedule=stored.get("schedule"),
+            attribution=stored.get("attribution"),
+        )
