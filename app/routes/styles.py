@@ -9,7 +9,7 @@ from urllib.parse import quote
 
 from fastapi import APIRouter, Depends, Request, Response
 from fastapi import Path as PathParam
-from fastapi.responses import JSONResponse
+from fastapi.responses import FileResponse, JSONResponse
 
 from app.dependencies import get_service, get_settings
 from app.responses import etag_matches, make_etag
@@ -67,6 +67,7 @@ def get_style(
         bounds=(west, south, east, north),
         schedule=rank_fades(cartography.schedule),
         hillshade_tiles_url=f"{base}/hillshade/{ds}/{{z}}/{{x}}/{{y}}.png?v={version}" if has_relief else None,
+        webfonts_url=f"{base}/fonts/webfonts/{{font-family}}/{{fontweight}}{{-fontstyle}}.css",
     )
     return JSONResponse(build_style(source), headers=headers)
 
@@ -124,9 +125,7 @@ def get_glyphs(
     """Signed-distance-field glyphs (MapLibre's glyph protobuf) of the labels' font."""
     font = served_font(fontstack)
     start, end = parse_range(glyph_range)
-    path = settings.font_path
-    if not path.is_file():
-        raise UnknownLayer(f"the label font {path.name} is missing on the server (set CCSM_FONT_PATH)")
+    path = label_font_file(settings)
     mtime = path.stat().st_mtime_ns
     etag = make_etag("glyphs", path.name, mtime, font, start, end)
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={GLYPHS_MAX_AGE_S}"}
@@ -134,3 +133,57 @@ def get_glyphs(
         return Response(status_code=304, headers=headers)
     data = cached_glyphs(path, mtime, font, start, end)
     return Response(data, media_type="application/x-protobuf", headers=headers)
+
+
+#: Where the label font file is served, for clients that draw text with the browser's fonts.
+FONT_FILE_PATH = "/fonts/files/label-font.ttf"
+
+
+def label_font_file(settings: Settings) -> Path:
+    """The label font file.
+
+    Raises
+    ------
+    UnknownLayer
+        The file is missing on the server.
+    """
+    path = settings.font_path
+    if not path.is_file():
+        raise UnknownLayer(f"the label font {path.name} is missing on the server (set CCSM_FONT_PATH)")
+    return path
+
+
+@router.get(
+    "/fonts/webfonts/{family}/{variant}.css",
+    response_class=Response,
+    responses={200: {"content": {"text/css": {}}}, 404: {"description": "Not the label font's family."}},
+    name="get_webfont_css",
+)
+def get_webfont_css(
+    request: Request,
+    family: Annotated[str, PathParam(description="Font family, lower case with hyphens (dejavu-sans).")],
+    variant: Annotated[str, PathParam(description="Weight and style, e.g. 400 or 400-italic (any is served).")],
+    settings: Annotated[Settings, Depends(get_settings)],
+) -> Response:
+    """A CSS @font-face of the label font, so OpenLayers (ol-mapbox-style) draws labels in it without a CDN."""
+    name = FONT_STACK.rsplit(" ", 1)[0]  # "DejaVu Sans"
+    if family != name.lower().replace(" ", "-"):
+        raise UnknownLayer(f"font family {family!r} is not served; this service serves {name!r}")
+    label_font_file(settings)
+    url = public_base_url(request) + FONT_FILE_PATH
+    css = (
+        f"@font-face {{ font-family: '{name}'; font-style: normal; font-weight: 100 900; "
+        f"src: url('{url}') format('truetype'); }}\n"
+    )
+    headers = {"Cache-Control": f"public, max-age={GLYPHS_MAX_AGE_S}"}
+    return Response(css, media_type="text/css", headers=headers)
+
+
+@router.get(FONT_FILE_PATH, response_class=FileResponse, name="get_label_font")
+def get_label_font(settings: Annotated[Settings, Depends(get_settings)]) -> FileResponse:
+    """The label font file itself (TrueType)."""
+    return FileResponse(
+        label_font_file(settings),
+        media_type="font/ttf",
+        headers={"Cache-Control": f"public, max-age={GLYPHS_MAX_AGE_S}"},
+    )

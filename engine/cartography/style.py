@@ -94,6 +94,10 @@ class StyleSource:
         Deepest zoom the hillshade tiles are made for (MapLibre overzooms beyond).
     attribution
         HTML attribution of the data (already escaped).
+    webfonts_url
+        Template of a CSS file declaring the label font as a web font (``{font-family}``, ``{fontweight}``,
+        ``{-fontstyle}``), for clients that draw text with the browser's fonts (ol-mapbox-style reads it from
+        the style's ``metadata["ol:webfonts"]``); None leaves it out.
     """
 
     dataset: str
@@ -105,6 +109,7 @@ class StyleSource:
     hillshade_tiles_url: str | None = None
     hillshade_maxzoom: int = 14
     attribution: str = ""
+    webfonts_url: str | None = None
 
 
 def fade_opacity(fade: RankFade) -> float | list[Any]:
@@ -217,6 +222,9 @@ def build_style(src: StyleSource) -> dict[str, Any]:
         raise InvalidParameter(f"dataset {src.dataset}: the interval schedule repeats a rank ({ranks})")
     schedule = sorted(src.schedule, key=lambda f: f.rank)
     west, south, east, north = src.bounds
+    metadata = {"ccsm:dataset": src.dataset}
+    if src.webfonts_url:
+        metadata["ol:webfonts"] = src.webfonts_url
     sources: dict[str, Any] = {CONTOUR_SOURCE: {"type": "vector", "url": src.tilejson_url}}
     layers: list[dict[str, Any]] = [
         {"id": "background", "type": "background", "paint": {"background-color": PAPER_COLOR}}
@@ -236,7 +244,7 @@ def build_style(src: StyleSource) -> dict[str, Any]:
     return {
         "version": 8,
         "name": src.name,
-        "metadata": {"ccsm:dataset": src.dataset},
+        "metadata": metadata,
         "center": [(west + east) / 2, (south + north) / 2],
         "zoom": 11,
         "glyphs": src.glyphs_url,
