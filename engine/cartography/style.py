@@ -40,6 +40,13 @@ LABEL_HALO_PX = 1.6
 #: How strongly the hillshade shows through (raster opacity; the contours stay the darkest ink).
 HILLSHADE_OPACITY = 0.45
 
+#: A label fades in over this many zoom levels above its own first zoom (the tiles' ``min_zoom`` of the label).
+LABEL_FADE_IN_ZOOMS = 0.5
+#: Zoom stops of the label opacity ramp are this far apart (linear between them: within 2 % of the exact ramp).
+LABEL_RAMP_STEP = 0.25
+#: The label ramp runs to this zoom; above it every label is at full opacity (past any served zoom).
+LABEL_RAMP_END = 20.0
+
 #: Source ids in the style.
 CONTOUR_SOURCE = "ccsm-contours"
 HILLSHADE_SOURCE = "ccsm-hillshade"
@@ -125,6 +132,44 @@ def fade_opacity(fade: RankFade) -> float | list[Any]:
     return ["interpolate", ["exponential", 2], ["zoom"], fade.hide_zoom, 0, fade.fade_zoom, 1]
 
 
+def rank_opacity_at(fade: RankFade, zoom: float) -> float:
+    """The rank's opacity at a zoom, as :func:`fade_opacity` draws it.
+
+    >>> rank_opacity_at(RankFade(0, 12.0, 11.0), 11.5)
+    0.4142
+    """
+    if fade.hide_zoom is None or zoom >= fade.fade_zoom:
+        return 1.0
+    if zoom <= fade.hide_zoom:
+        return 0.0
+    span = fade.fade_zoom - fade.hide_zoom
+    return round((2 ** (zoom - fade.hide_zoom) - 1) / (2**span - 1), 4)
+
+
+def label_opacity(fade: RankFade) -> list[Any]:
+    """A label's opacity: its rank's fade out (as its line's) times its own fade in over LABEL_FADE_IN_ZOOMS
+    above the label's first zoom (``min_zoom``, fixed per label where its anchor holds still and it meets no
+    other label; absent: shown as its line).
+
+    A zoom ramp takes literal stops only, so the product is sampled every LABEL_RAMP_STEP zooms: at each stop
+    the rank's part is a number and the label's part an expression of ``min_zoom``.
+    """
+    start = max(0.0, float(int(fade.hide_zoom))) if fade.hide_zoom is not None and fade.hide_zoom > 0 else 0.0
+    n = int(round((LABEL_RAMP_END - start) / LABEL_RAMP_STEP))
+    zooms = {round(start + k * LABEL_RAMP_STEP, 4) for k in range(n + 1)}
+    if fade.hide_zoom is not None and fade.hide_zoom >= start:  # the rank ramp's own ends, exactly
+        zooms |= {round(fade.hide_zoom, 4), round(fade.fade_zoom, 4)}
+    stops: list[Any] = []
+    for zoom in sorted(zooms):
+        fade_in = [
+            "max",
+            0,
+            ["min", 1, ["/", ["-", zoom, ["to-number", ["get", "min_zoom"], -1]], LABEL_FADE_IN_ZOOMS]],
+        ]
+        stops += [zoom, ["*", rank_opacity_at(fade, zoom), fade_in]]
+    return ["interpolate", ["linear"], ["zoom"], *stops]
+
+
 def _layer_minzoom(fade: RankFade) -> dict[str, float]:
     # Below hide_zoom the rank is invisible anyway; the layer's minzoom spares the renderer the work. MapLibre
     # takes minzoom >= 0 and tiles only carry the rank where hide_zoom < z + 1, so flooring loses nothing.
@@ -177,7 +222,7 @@ def contour_label_layer(fade: RankFade) -> dict[str, Any]:
             "text-color": LABEL_COLOR,
             "text-halo-color": HALO_COLOR,
             "text-halo-width": LABEL_HALO_PX,
-            "text-opacity": fade_opacity(fade),
+            "text-opacity": label_opacity(fade),
         },
     }
 

@@ -72,7 +72,6 @@ def test_each_rank_fades_between_its_own_zooms_with_base_2():
     assert lines["contours-rank-1"]["filter"] == ["==", ["to-number", ["get", "rank"]], 1]
     assert lines["contours-rank-1"]["paint"]["line-opacity"][3:] == [9.6, 0, 10.9, 1]
     assert lines["contours-rank-2"]["paint"]["line-opacity"] == 1  # the top rank never hides
-    assert lines["contour-labels-rank-0"]["paint"]["text-opacity"] == lines["contours-rank-0"]["paint"]["line-opacity"]
 
 
 def test_index_contours_are_heavier():
@@ -126,3 +125,53 @@ def test_maplibre_style_spec_validates_the_style(tmp_path):
     result = subprocess.run([node, str(VALIDATOR), str(path)], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stdout + result.stderr
     assert result.stdout.strip() == ""
+
+
+def evaluate_label_opacity(expr, zoom: float, min_zoom: float) -> float:
+    """Evaluate the style's label opacity as MapLibre does: linear between the zoom stops, each stop's output
+    an arithmetic expression of the feature's min_zoom."""
+
+    def ev(e):
+        if not isinstance(e, list):
+            return e
+        op, *args = e
+        if op == "get":
+            return min_zoom
+        if op == "to-number":
+            return ev(args[0])
+        vals = [ev(a) for a in args]
+        return (
+            {"max": max, "min": min}[op](*vals)
+            if op in ("max", "min")
+            else {"*": lambda a, b: a * b, "/": lambda a, b: a / b, "-": lambda a, b: a - b}[op](*vals)
+        )
+
+    assert expr[:3] == ["interpolate", ["linear"], ["zoom"]]
+    stops = expr[3:]
+    zs, outs = stops[0::2], stops[1::2]
+    if zoom <= zs[0]:
+        return ev(outs[0])
+    for z0, z1, o0, o1 in zip(zs, zs[1:], outs, outs[1:], strict=False):
+        if z0 <= zoom <= z1:
+            return ev(o0) + (ev(o1) - ev(o0)) * (zoom - z0) / (z1 - z0)
+    return ev(outs[-1])
+
+
+@pytest.mark.parametrize(
+    "zoom, min_zoom, expected",
+    [
+        (12.5, 11.0, 1.0),  # above both ramps
+        (11.0, 11.0, 0.0),  # at its own first zoom: not yet shown
+        (11.25, 11.0, 0.5),  # half way in
+    ],
+)
+def test_a_label_fades_in_above_its_own_first_zoom(zoom, min_zoom, expected):
+    expr = layers_by_id(build_style(source()))["contour-labels-rank-2"]["paint"]["text-opacity"]
+    assert evaluate_label_opacity(expr, zoom, min_zoom) == pytest.approx(expected, abs=0.02)
+
+
+def test_a_label_fades_out_with_its_rank():
+    expr = layers_by_id(build_style(source()))["contour-labels-rank-1"]["paint"]["text-opacity"]
+    for zoom in (9.6, 9.9, 10.2, 10.6, 10.9, 11.5):
+        exact = 0 if zoom <= 9.6 else min(1.0, (2 ** (zoom - 9.6) - 1) / (2**1.3 - 1))
+        assert evaluate_label_opacity(expr, zoom, min_zoom=5.0) == pytest.approx(exact, abs=0.03), zoom

@@ -18,6 +18,7 @@ const METHOD_NAMES = {
   original: 'Original',
 };
 const COLOR_MAIN = '#8a4b1c';
+const MORPH_FADE_SPAN = 0.5; // zoom levels over which a contour grows in at its min_zoom (morph_fade 0 -> 1)
 const COLOR_COMPARE = '#1b63c6';
 
 const $ = (id) => document.getElementById(id);
@@ -369,7 +370,9 @@ async function morphFor(id) {
     return null;
   }
   if (!Array.isArray(tilejson.tiles) || !tilejson.tiles.length) return null;
-  return new app.plugin.CcsmMorph({tilejson}).setupMaplibre(maplibregl);
+  // A contour that CCSM lets vanish at its scale (min_zoom) fades over half a level, like the style's ranks
+  // fade over theirs: a wheel step of about 0.2 zoom never takes it from full width to nothing at once.
+  return new app.plugin.CcsmMorph({tilejson, fadeSpan: MORPH_FADE_SPAN}).setupMaplibre(maplibregl);
 }
 
 /** The dataset's style.json, or null when the service has none for it (the page then draws plain lines). */
