@@ -45,7 +45,7 @@ from chromium_launch import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
 from engine.tiles.scale import zoom_for_scale  # noqa: E402
 
 VIEWPORT = {"width": 1000, "height": 700}
-SCALES = [50_000, 70_000, 100_000, 150_000, 200_000, 250_000, 350_000, 500_000, 700_000, 1_000_000]
+SCALES = [50_000, 75_000, 100_000, 150_000, 250_000, 350_000, 500_000, 1_000_000]
 SOURCE_SCALE, TARGET_SCALE = 50_000, 500_000
 #: Pixels left out along the data's edge on screen (lines end there; the edge itself is not map ink).
 EDGE_PX = 4
@@ -73,6 +73,7 @@ SETTLE_JS = """() => new Promise((resolve) => {
     const done = () => requestAnimationFrame(() => requestAnimationFrame(() => resolve(true)));
     if (m.loaded() && m.areTilesLoaded()) { done(); return; }
     m.once('idle', done);
+    m.triggerRepaint();
 })"""
 
 
@@ -91,10 +92,10 @@ def set_visible(page: Any, ids: list[str], visible: bool) -> None:
 def ink_share(page: Any, ink_ids: list[str], bounds: list[float]) -> float:
     """Summed ink per data pixel of the current frame (see the module docstring)."""
     page.evaluate(SETTLE_JS)
-    shown = luma(page.screenshot())
+    shown = luma(page.screenshot(timeout=120_000))
     set_visible(page, ink_ids, False)
     page.evaluate(SETTLE_JS)
-    hidden = luma(page.screenshot())
+    hidden = luma(page.screenshot(timeout=120_000))
     set_visible(page, ink_ids, True)
     x0, y0, x1, y1 = page.evaluate(
         """(b) => { const a = clientMap.project([b[0], b[3]]), c = clientMap.project([b[2], b[1]]);
@@ -118,6 +119,7 @@ def measure(browser: Any, url: str) -> tuple[list[float], list[float], float]:
     page = context.new_page()
     geojson = SAMPLE_GEOJSON.read_bytes()
     page.route("**/bench/old.geojson", lambda route: route.fulfill(body=geojson, content_type="application/json"))
+    page.set_default_timeout(120_000)
     page.goto(f"{url}/web/clients/maplibre.html?dataset=sample")
     page.wait_for_function("() => window.clientMap && clientMap.loaded()", timeout=120_000)
     if any(layer["id"] == "hillshade" for layer in style["layers"]):
