@@ -80,6 +80,8 @@ def test_bitmaps_are_signed_distance_fields(latin):
     # A distance field, not a mask: values step gently (at most 255/8 per pixel, plus rounding).
     assert np.abs(np.diff(sdf.astype(int), axis=1)).max() <= 255 / 8 * 1.5
     assert 10 <= one.advance <= 20  # a digit of a 24 px em
+    # The top is signed (zigzag): a digit's top edge sits a few pixels below MapLibre's top line.
+    assert -15 < one.top < 0 and one.left >= 0
 
 
 def test_wider_letters_are_wider(latin):
