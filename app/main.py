@@ -24,7 +24,7 @@ from app.errors import add_exception_handlers, error_body, public_message
 from app.head_requests import HeadAsGetMiddleware
 from app.lifespan import lifespan
 from app.render_pool import RETRY_AFTER_S, RenderUnavailable, render_lanes_for
-from app.routes import datasets, meta, simplify, tiles
+from app.routes import datasets, hillshade, meta, simplify, styles, tiles
 from app.settings import Settings
 
 log = logging.getLogger("ccsm.app")
@@ -107,6 +107,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_exception_handler(RenderUnavailable, render_unavailable_handler)
     add_api_docs(app)
     app.include_router(tiles.router)
+    app.include_router(hillshade.router)
+    app.include_router(styles.router)
     app.include_router(simplify.router)
     app.include_router(datasets.router)
     app.include_router(meta.router)

@@ -24,9 +24,10 @@ from app.errors import BuildQueueFull, DatasetExists, MalformedUpload, log_safe
 from app.settings import Settings
 from engine.cartography.options import PARAMS_KEY as CARTOGRAPHY_KEY
 from engine.cartography.options import CartographyOptions
-from engine.errors import StoreError, StoreNotReady, StoreUnwritable, UnknownLayer
+from engine.errors import CCSMError, StoreError, StoreNotReady, StoreUnwritable, UnknownLayer
 from engine.serve.build_job import BuildJob
-from engine.serve.datasets import SourceSpec, build_lock, slugify, source_hash
+from engine.serve.datasets import RELIEF_DEM_KEY, SourceSpec, build_lock, slugify, source_hash
+from engine.serve.relief import ReliefCache
 from engine.serve.renderer import Renderer, TileOptions
 from engine.store.sqlite import CCSStore, DatasetInfo, unwritable_reason
 from engine.tiles.grid import mercator_to_lonlat
@@ -66,12 +67,28 @@ def specs_from_settings(settings: Settings) -> list[SourceSpec]:
             specs.append(SourceSpec(path=path, dataset=ident, name=path.stem, **common))  # type: ignore[arg-type]
         return specs
     if settings.serve_sample:
+        from engine.io.sample import sample_dem_path
         from engine.io.source import sample_contours_path
 
         common["elevation_field"] = None
         common["interval"] = None
-        return [SourceSpec(path=sample_contours_path(), dataset=SAMPLE_ID, name=SAMPLE_NAME, **common)]  # type: ignore[arg-type]
+        # The sample's contours were traced from the bundled DEM: shade that under them.
+        try:
+            relief = {"relief_dem": sample_dem_path()}
+        except CCSMError:  # no DEM beside the sample (an installed wheel): no hillshade, contours still served
+            relief = {}
+        return [
+            SourceSpec(path=sample_contours_path(), dataset=SAMPLE_ID, name=SAMPLE_NAME, **common, **relief)  # type: ignore[arg-type]
+        ]
     return []
+
+
+def source_job_params(spec: SourceSpec) -> dict[str, Any]:
+    """A configured source's spec fields as a build process takes them (plain JSON values)."""
+    params = spec.params()
+    if spec.relief_dem is not None:  # not part of the content hash, but the build stores it for hillshade
+        params[RELIEF_DEM_KEY] = str(spec.relief_dem)
+    return params
 
 
 def open_checked_store(path: Path) -> CCSStore:
@@ -162,6 +179,7 @@ class DatasetService:
     def __init__(self, settings: Settings) -> None:
         self.settings = settings
         self.store = open_checked_store(settings.store_path)
+        self.reliefs = ReliefCache()
         self.renderer = Renderer(
             self.store,
             TileOptions(
@@ -191,7 +209,7 @@ class DatasetService:
                 dataset=spec.dataset,
                 source_path=str(spec.path),
                 name=spec.name,
-                params=spec.params(),
+                params=source_job_params(spec),
                 workers=self.settings.build_workers,
             )
             self.builds.submit(job, limit_queue=False)

@@ -132,6 +132,11 @@ class Settings(BaseSettings):
     @classmethod
     def _web_dir_from_project(cls, value: Path) -> Path:
         return value if value.is_absolute() else PROJECT_DIR / value
+    font_path: Path = Field(
+        Path("/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf"),
+        description="TrueType font the service makes its label glyphs from (GET /fonts/...); DejaVu Sans by "
+        "default (Debian's fonts-dejavu-core).",
+    )
     log_level: str = Field("info", description="Log level of the service.")
 
     @field_validator("sources", "cors_origins", mode="before")

@@ -25,7 +25,7 @@ from typing import Any
 from engine.cartography.options import PARAMS_KEY, CartographyOptions
 from engine.errors import BuildCancelled, CCSMError
 from engine.io.source import read_source
-from engine.serve.datasets import SourceSpec, build_and_save, build_dataset, build_lock
+from engine.serve.datasets import RELIEF_DEM_KEY, SourceSpec, build_and_save, build_dataset, build_lock
 from engine.store.sqlite import CCSStore
 
 log = logging.getLogger("ccsm.build")
@@ -115,6 +115,8 @@ def run(job: BuildJob) -> int:
             fields = dict(job.params)
             if PARAMS_KEY in fields:  # the options travel as plain values; the spec takes the dataclass
                 fields[PARAMS_KEY] = CartographyOptions.from_params(job.params)
+            if fields.get(RELIEF_DEM_KEY):
+                fields[RELIEF_DEM_KEY] = Path(fields[RELIEF_DEM_KEY])
             spec = SourceSpec(Path(job.source_path), job.dataset, job.name, **fields)
             with build_lock(Path(job.store_path)):
                 progress(0, 0)  # cancelled while waiting for the lock: stop here

@@ -22,6 +22,7 @@ from typing import Any
 from engine.cartography.options import PARAMS_KEY, CartographyOptions
 from engine.cartography.units import source_units
 from engine.ccsm.build import BuiltSet, build_contour_set
+from engine.io.dem import DEM_SUFFIXES
 from engine.io.source import read_source
 from engine.params import BuildParams
 from engine.serve.records import contour_rows, dataset_meta
@@ -47,6 +48,10 @@ def source_hash(
     return h.hexdigest()
 
 
+#: Key of the stored params that holds the path of the DEM to shade (see SourceSpec.relief_dem).
+RELIEF_DEM_KEY = "relief_dem"
+
+
 @dataclass(frozen=True)
 class SourceSpec:
     """A source to build into the store and how to read it.
@@ -68,6 +73,10 @@ class SourceSpec:
     cartography
         Units, index contours, attribute names and schedule override (docs/design.md section 9); None for the
         defaults (units then as the source states them, else metres).
+    relief_dem
+        A DEM to shade under the contours (docs/clients.md): the source itself when it is a DEM, or the DEM
+        contours were traced from (the bundled sample's). Stored with the dataset as a path; not part of the
+        content hash, since it changes no contour.
     """
 
     path: Path
@@ -79,6 +88,13 @@ class SourceSpec:
     target_scale: float = 500_000.0
     block: int | None = None
     cartography: CartographyOptions | None = None
+    relief_dem: Path | None = None
+
+    def relief_path(self) -> Path | None:
+        """The DEM to shade under this source's contours, or None."""
+        if self.relief_dem is not None:
+            return self.relief_dem
+        return self.path if self.path.suffix.lower() in DEM_SUFFIXES else None
 
     def params(self) -> dict[str, Any]:
         """The parameters that decide the build (part of the content hash)."""
@@ -96,12 +112,16 @@ class SourceSpec:
 
     def stored_params(self) -> dict[str, Any]:
         """The parameters as stored with the dataset: :meth:`params` with the vertical unit resolved (given,
-        else as the source states it, else metres)."""
+        else as the source states it, else metres), and the path of the DEM to shade (``relief_dem``), if any."""
         options = (self.cartography or CartographyOptions()).checked()
         if options.units is None:
             units = source_units(self.path, self.elevation_field) or "m"
             options = replace(options, units=units)
-        return {**self.params(), PARAMS_KEY: options.as_params()}
+        stored = {**self.params(), PARAMS_KEY: options.as_params()}
+        relief = self.relief_path()
+        if relief is not None:
+            stored[RELIEF_DEM_KEY] = str(relief.resolve())
+        return stored
 
 
 _ID_CHARS = frozenset("abcdefghijklmnopqrstuvwxyz0123456789_-")

@@ -255,8 +255,9 @@ def app(browser: Any, service_url: str) -> Iterator[App]:
 
     def on_request_failed(request: Any) -> None:
         failure = request.failure or ""
-        # Overtaken tile loads are aborted on purpose (the page removes their source).
-        if "ERR_ABORTED" in failure and ".mvt" in request.url:
+        # Overtaken tile loads are aborted on purpose (the page removes their source; MapLibre drops hillshade
+        # tiles it no longer needs).
+        if "ERR_ABORTED" in failure and (".mvt" in request.url or "/hillshade/" in request.url):
             watch.aborted_tiles.append(request.url)
         else:
             watch.failed_requests.append(f"{request.url} ({failure})")

@@ -8,6 +8,7 @@ import {datasetLabel, initialDataset, tilejsonUrl} from './datasets.js';
 import {tooltipText, tReadout, zoomReadout} from './readout.js';
 import {formatScale, quantiseZoom, scaleDenominator} from './scale.js';
 import {installDropZone, uploadDataset} from './upload.js';
+import {contourLineLayers, contourSourceId, hillshadeOf, labelLayers, styleUrl} from './stylerules.js';
 
 const METHOD_NAMES = {
   ccsm: 'CCSM',
@@ -17,6 +18,7 @@ const METHOD_NAMES = {
   original: 'Original',
 };
 const COLOR_MAIN = '#8a4b1c';
+const MORPH_FADE_SPAN = 0.5; // zoom levels over which a contour grows in at its min_zoom (morph_fade 0 -> 1)
 const COLOR_COMPARE = '#1b63c6';
 
 const $ = (id) => document.getElementById(id);
@@ -35,6 +37,9 @@ const app = {
     compare: params.get('compare') ?? 'dp',
     view: params.get('view') ?? 'single',
     t: params.has('t') ? Number(params.get('t')) : null,
+    // Hillshade under the contours (when the dataset has a DEM); ?hillshade=off starts without it.
+    hillshade: params.get('hillshade') !== 'off',
+    style: null, // the dataset's style.json (GET /styles/{id}/style.json), or null
   },
   // The ccsm-morph plugin's module (null when it could not be loaded: CCSM then uses the eighth-swap), and
   // the CcsmMorph of the dataset's morph tiles (null when the service has none for it).
@@ -49,6 +54,7 @@ const app = {
   lastTStats: null,
   datasetList: [],
   listPoll: null,
+  labelLayerIds: [], // the label layers of the dataset's style on map a
 };
 const {state} = app;
 
@@ -78,11 +84,17 @@ function showError(err) {
   showMessage(text, 'error');
 }
 
-// ---------------------------------------------------------------- base style (offline: no glyphs, no sprites)
+// ---------------------------------------------------------------- base style (offline: the service's own glyphs, no sprites)
+
+const HILLSHADE_SOURCE = 'page-hillshade';
+const HILLSHADE_LAYER = 'page-hillshade';
+const LABEL_SOURCE = 'page-labels';
 
 function baseStyle() {
   return {
     version: 8,
+    // The label font comes from the service itself (GET /fonts/...), never from outside.
+    glyphs: `${window.location.origin}/fonts/{fontstack}/{range}.pbf`,
     // No cross-fades: a swapped-in buffer must appear in the same frame the old one goes.
     transition: {duration: 0, delay: 0},
     sources: {extent: {type: 'geojson', data: {type: 'FeatureCollection', features: []}}},
@@ -110,7 +122,8 @@ function createMap(container) {
     zoom: 1,
     hash: container === 'map-a' ? 'map' : false,
     attributionControl: {compact: true},
-    fadeDuration: 0,
+    // Labels that MapLibre's collision test hides or shows fade over this time instead of popping.
+    fadeDuration: 300,
     maxPitch: 0,
     dragRotate: false,
     // Playwright screenshots read the composited page, so preserveDrawingBuffer is not needed.
@@ -322,16 +335,18 @@ async function selectDataset(id, {fit = true} = {}) {
     getJSON(tilejsonUrl(listed), `TileJSON of “${listed.name ?? id}”`),
   ]);
   if (!Array.isArray(tj.tiles) || !tj.tiles.length) throw new Error(`TileJSON of “${id}” lists no tiles URL`);
-  const morph = await morphFor(id);
+  const [morph, style] = await Promise.all([morphFor(id), styleFor(id)]);
   if (app.morph) app.morph.teardownMaplibre(maplibregl);
   app.morph = morph;
   state.datasetId = id;
   state.dataset = ds;
   state.tilejson = tj;
+  state.style = style;
   $('dataset').value = id;
   const mapA = app.maps.a;
   await whenStyleLoaded(mapA);
   setExtent(mapA, tj.bounds);
+  applyCartography(mapA, style);
   if (fit) {
     if (tj.bounds) mapA.fitBounds(tj.bounds, {padding: 30, animate: false});
     else if (tj.center) mapA.jumpTo({center: [tj.center[0], tj.center[1]], zoom: tj.center[2] ?? 10});
@@ -355,7 +370,47 @@ async function morphFor(id) {
     return null;
   }
   if (!Array.isArray(tilejson.tiles) || !tilejson.tiles.length) return null;
-  return new app.plugin.CcsmMorph({tilejson}).setupMaplibre(maplibregl);
+  // A contour that CCSM lets vanish at its scale (min_zoom) fades over half a level, like the style's ranks
+  // fade over theirs: a wheel step of about 0.2 zoom never takes it from full width to nothing at once.
+  return new app.plugin.CcsmMorph({tilejson, fadeSpan: MORPH_FADE_SPAN}).setupMaplibre(maplibregl);
+}
+
+/** The dataset's style.json, or null when the service has none for it (the page then draws plain lines). */
+async function styleFor(id) {
+  try {
+    const response = await fetch(styleUrl(id));
+    return response.ok ? await response.json() : null;
+  } catch {
+    return null;
+  }
+}
+
+/**
+ * Draw a dataset the way its style.json says: hillshade under everything, the contour lines by rank with
+ * their fade and index weight (through the morphing layer), and the labels on top from the per-level tiles.
+ */
+function applyCartography(map, style) {
+  for (const id of app.labelLayerIds) if (map.getLayer(id)) map.removeLayer(id);
+  app.labelLayerIds = [];
+  if (map.getLayer(HILLSHADE_LAYER)) map.removeLayer(HILLSHADE_LAYER);
+  for (const id of [HILLSHADE_SOURCE, LABEL_SOURCE]) if (map.getSource(id)) map.removeSource(id);
+  app.layers.main.setStyleLayers(style ? contourLineLayers(style) : null);
+  $('hillshade-field').hidden = !hillshadeOf(style);
+  if (!style) return;
+  const hillshade = hillshadeOf(style);
+  if (hillshade) {
+    map.addSource(HILLSHADE_SOURCE, hillshade.source);
+    const layout = {...hillshade.layer.layout, visibility: state.hillshade ? 'visible' : 'none'};
+    map.addLayer({...hillshade.layer, id: HILLSHADE_LAYER, source: HILLSHADE_SOURCE, layout}, 'extent-line');
+  }
+  const contours = style.sources?.[contourSourceId(style)];
+  if (contours) {
+    map.addSource(LABEL_SOURCE, {...contours});
+    for (const layer of labelLayers(style, LABEL_SOURCE)) {
+      map.addLayer(layer);
+      app.labelLayerIds.push(layer.id);
+    }
+  }
 }
 
 async function handleFile(file) {
@@ -420,6 +475,13 @@ function wireControls() {
     pin.checked = true;
     slider.value = String(state.t);
   }
+  const hillshade = $('hillshade');
+  hillshade.checked = state.hillshade;
+  hillshade.onchange = () => {
+    state.hillshade = hillshade.checked;
+    const map = app.maps.a;
+    if (map.getLayer(HILLSHADE_LAYER)) map.setLayoutProperty(HILLSHADE_LAYER, 'visibility', state.hillshade ? 'visible' : 'none');
+  };
   pin.onchange = applyT;
   slider.oninput = applyT;
   applyT();
@@ -475,6 +537,10 @@ window.ccsm = {
     });
   },
   layerStates: () => layersInUse().map((l) => l.state()),
+  /** The ids of the label layers and of the hillshade layer on map a (the dataset's style.json). */
+  get cartography() {
+    return {labelLayerIds: [...app.labelLayerIds], hillshadeLayerId: app.maps.a?.getLayer(HILLSHADE_LAYER) ? HILLSHADE_LAYER : null};
+  },
   /** The CcsmMorph of the dataset (null: no morph tiles, or the plugin is not loaded). */
   get morph() {
     return app.morph;

@@ -55,6 +55,7 @@ export class MorphingContours {
     this._counter = 0;
     this.morph = null; // a CcsmMorph of the dataset's morph tiles, or null
     this._plugin = null; // the plugin's MorphLayer while it draws this layer
+    this.styleLayers = null; // the dataset style's contour line layers the plugin draws (null: plain lines)
     this._pluginSwaps = 0;
     this._handlers = {
       render: () => this.update(),
@@ -125,6 +126,18 @@ export class MorphingContours {
     this.update();
   }
 
+  /**
+   * Draw the continuous morph with these style layers (the dataset's style.json line layers, without a
+   * source: see stylerules.js) instead of the two plain ones; null goes back to the plain ones.
+   */
+  setStyleLayers(layers) {
+    const next = layers?.length ? layers : null;
+    if (next === this.styleLayers) return;
+    this.styleLayers = next;
+    this._removePlugin();
+    this.update();
+  }
+
   setOverride(q) {
     this.override = q;
     this._plugin?.setOverride(q);
@@ -189,7 +202,7 @@ export class MorphingContours {
     this._plugin = this.morph.addTo(this.map, {
       id,
       beforeId: this.beforeId,
-      layers: [
+      layers: this.styleLayers?.map((l) => ({...l, id: `${id}-${l.id}`})) ?? [
         {
           ...base,
           id: `${id}-line`,

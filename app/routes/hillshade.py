@@ -1,0 +1,55 @@
+"""Hillshade raster tiles of a dataset's DEM, to lie under the contours."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, Path, Request, Response
+from fastapi.concurrency import run_in_threadpool
+
+from app.dependencies import get_service, get_settings
+from app.responses import etag_matches, make_etag
+from app.service import DatasetService
+from app.settings import Settings
+from engine.errors import UnknownLayer
+from engine.tiles.grid import check_tile
+from engine.tiles.hillshade import hillshade_tile
+
+router = APIRouter(tags=["tiles"])
+
+
+@router.get(
+    "/hillshade/{dataset}/{z}/{x}/{y}.png",
+    response_class=Response,
+    responses={
+        200: {"content": {"image/png": {}}, "description": "A 256 px grey hillshade tile (alpha 0 off the DEM)."},
+        204: {"description": "The tile misses the DEM."},
+        304: {"description": "Not modified (If-None-Match matched the ETag)."},
+        404: {"description": "Unknown dataset, a dataset without a DEM, or z/x/y outside the tile matrix."},
+    },
+    name="get_hillshade_tile",
+)
+async def get_hillshade_tile(
+    request: Request,
+    dataset: Annotated[str, Path(description="Dataset id (see GET /datasets).", max_length=64)],
+    z: Annotated[int, Path(description="Zoom level of the tile.", ge=0, le=30)],
+    x: Annotated[int, Path(description="Tile column, 0 at the antimeridian (west).", ge=0)],
+    y: Annotated[int, Path(description="Tile row, 0 at the north edge (XYZ scheme).", ge=0)],
+    service: Annotated[DatasetService, Depends(get_service)],
+    settings: Annotated[Settings, Depends(get_settings)],
+) -> Response:
+    """One hillshade tile of the DEM a dataset was made from (or was given with)."""
+    tile = check_tile(z, x, y, settings.min_zoom, settings.max_zoom)
+    version = service.require_ready(dataset)
+    etag = make_etag("hillshade", dataset, version, z, x, y)
+    headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
+    if etag_matches(request, etag):
+        return Response(status_code=304, headers=headers)
+    info, _ = service.renderer.info(dataset)
+    relief = await run_in_threadpool(service.reliefs.relief, info)
+    if relief is None:
+        raise UnknownLayer(f"dataset {dataset!r} has no DEM to shade")
+    png = await run_in_threadpool(hillshade_tile, relief, tile)
+    if png is None:
+        return Response(status_code=204, headers=headers)
+    return Response(png, media_type="image/png", headers=headers)

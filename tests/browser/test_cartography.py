@@ -1,0 +1,220 @@
+"""The dataset's style.json in three clients, and no popping while zooming (issue 11; docs/clients.md).
+
+1. MapLibre GL JS loads only the style URL (web/clients/maplibre.html) and draws contours, labels and the
+   hillshade: rendered features of the style's layers, and pixels with and without those layers.
+2. OpenLayers with ol-mapbox-style (web/clients/openlayers.html, both from web/node_modules) draws the same
+   style: contour-coloured pixels, and more dark pixels with the label layers than without them.
+3. No pop while wheel-zooming on the project's page, three zoom levels out and back in. Method: at every
+   rendered frame the page records the contours and labels on screen (queryRenderedFeatures on the visible
+   line layers and the label layers, by feature id) with the zoom. Each one's opacity at that zoom follows from
+   its own `fade_zoom` and `hide_zoom` (the style's ramp: exponential base 2 from 0 at hide_zoom to 1 at
+   fade_zoom), times `morph_fade` on lines (CCSM's own vanishing of small contours narrows them) and on labels
+   their fade in above their own first zoom (`min_zoom`, as the style draws it). Between consecutive frames,
+   a line or label in
+   the middle of the view (the middle 40 % box, whose ground the other frame shows as long as a frame zooms by
+   less than a level, so nothing counts for entering at the view's edge) that the other frame does not show
+   anywhere must be drawn at most at FADE_EPS opacity: everything arrives and leaves by fading.
+"""
+
+from __future__ import annotations
+
+import httpx
+import numpy as np
+from PIL import Image
+
+from engine.cartography.style import LABEL_FADE_IN_ZOOMS
+
+#: Opacity at or below which a line or label may appear or go between two frames (it is fading). The style's
+#: ramps span a zoom level or more, so they pass at a few hundredths; the tightest case is CCSM's own
+#: vanishing of small contours (``morph_fade`` over half a level, drawn at the plugin's step): on this
+#: loaded test machine, with every frame queried, the plugin skips steps, and the largest such jump seen was
+#: 0.29 (a contour growing in from nothing to 0.29 of its width in one frame).
+FADE_EPS = 0.3
+#: The middle box of the view whose lines and labels are checked, as fractions of its width and height.
+MIDDLE_LO, MIDDLE_HI = 0.3, 0.7
+
+LIGHT_JS = """() => new Promise((resolve) => {
+    const m = window.clientMap;
+    const done = () => requestAnimationFrame(() => requestAnimationFrame(() => resolve(true)));
+    if (m.loaded() && m.areTilesLoaded()) { done(); return; }
+    m.once('idle', done);
+})"""
+
+
+def style_of(base_url: str, dataset: str = "sample") -> dict:
+    return httpx.get(f"{base_url}/styles/{dataset}/style.json", timeout=30).json()
+
+
+def centre_and_bounds(base_url: str) -> tuple[list[float], list[float]]:
+    w, s, e, n = httpx.get(f"{base_url}/tiles/sample/tilejson.json", timeout=30).json()["bounds"]
+    return [(w + e) / 2, (s + n) / 2], [w, s, e, n]
+
+
+def luma(png: bytes) -> np.ndarray:
+    import io
+
+    rgb = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.float64)
+    return rgb @ np.array([0.299, 0.587, 0.114])
+
+
+def open_client(app, page_name: str, query: str = "") -> None:
+    app.page.goto(f"{app.base_url}/web/clients/{page_name}?dataset=sample{query}")
+
+
+def test_maplibre_draws_contours_labels_and_hillshade_from_the_style(app):
+    style = style_of(app.base_url)
+    lines = [la["id"] for la in style["layers"] if la["type"] == "line"]
+    labels = [la["id"] for la in style["layers"] if la["type"] == "symbol"]
+    centre, _ = centre_and_bounds(app.base_url)
+    # Zoom 13: every label there is past its own fade in (first zooms of the sample reach 12.3).
+    open_client(app, "maplibre.html", f"#13/{centre[1]}/{centre[0]}")
+    app.wait_until("() => window.clientMap && clientMap.loaded()", 60, what="the style loaded")
+    app.page.evaluate(LIGHT_JS)
+    drawn = app.page.evaluate(
+        """([lines, labels]) => ({
+            lines: clientMap.queryRenderedFeatures({layers: lines}).length,
+            levels: [...new Set(clientMap.queryRenderedFeatures({layers: lines}).map((f) => f.properties.level))],
+            labels: clientMap.queryRenderedFeatures({layers: labels}).map((f) => f.properties.label),
+        })""",
+        [lines, labels],
+    )
+    assert drawn["lines"] > 50, drawn
+    assert sorted(drawn["levels"]) == [0, 1], "index and intermediate lines are both drawn"
+    assert len(drawn["labels"]) >= 1 and all(t.endswith(" m") for t in drawn["labels"]), drawn["labels"]
+
+    def frame(hidden: list[str]) -> np.ndarray:
+        app.page.evaluate(
+            "(ids) => clientMap.style._layers && clientMap.getStyle().layers.forEach((l) => "
+            "clientMap.setLayoutProperty(l.id, 'visibility', ids.includes(l.id) ? 'none' : 'visible'))",
+            hidden,
+        )
+        app.page.evaluate(LIGHT_JS)
+        return luma(app.page.screenshot())
+
+    everything = frame([])
+    no_labels = frame(labels)
+    no_ink = frame(labels + lines)
+    no_hillshade = frame(labels + lines + ["hillshade"])
+    # Labels, lines and relief each darken pixels of their own.
+    assert ((no_labels - everything) > 40).sum() > 50, "labels drew no text"  # a few labels of thin text
+    assert ((no_ink - no_labels) > 20).sum() > 2000, "no contour pixels"
+    assert np.abs(no_hillshade - no_ink).mean() > 3, "no hillshade"
+    assert app.watch.outside_requests == []
+
+
+def test_openlayers_draws_contours_and_labels_from_the_same_style(app):
+    style = style_of(app.base_url)
+    centre, _ = centre_and_bounds(app.base_url)
+    # OpenLayers zooms count 256 px tiles: one more than MapLibre's for the same scale.
+    open_client(app, "openlayers.html", f"&lon={centre[0]}&lat={centre[1]}&zoom=13")
+    app.wait_until("() => window.clientReady && window.clientMap", 60, what="ol-mapbox-style applied")
+    app.page.evaluate("() => window.clientReady")
+
+    def rendered() -> np.ndarray:
+        app.page.evaluate(
+            "() => new Promise((r) => { clientMap.once('rendercomplete', () => r(true)); clientMap.render(); })"
+        )
+        app.page.wait_for_timeout(300)
+        return np.asarray(Image.open(__import__("io").BytesIO(app.page.screenshot())).convert("RGB"), dtype=int)
+
+    full = rendered()
+    # Contour ink: brown pixels (red well above blue) over the paper and the grey hillshade.
+    brown = (full[..., 0] - full[..., 2] > 40).sum()
+    assert brown > 2000, brown
+    # The same style without its label layers, applied to a fresh map in the same place.
+    no_labels = dict(style, layers=[la for la in style["layers"] if la["type"] != "symbol"])
+    app.page.evaluate(
+        """([s, lon, lat]) => {
+            clientMap.setTarget(null);
+            const view = new ol.View({center: ol.proj.fromLonLat([lon, lat]), zoom: 13});
+            window.clientMap = new ol.Map({target: 'map', view});
+            return olms.apply(clientMap, s).then(() => clientMap.setView(view));
+        }""",
+        [no_labels, *centre],
+    )
+    without = rendered()
+    darker = (without.sum(axis=2) - full.sum(axis=2)) > 120
+    assert darker.sum() > 200, "the label layers drew no text"
+    assert app.watch.outside_requests == []
+
+
+RECORD_JS = """([labelIds, box, LABEL_FADE_IN]) => {
+    const l = window.ccsm.layers.main, m = l.map;
+    const frames = [];
+    window.__frames = frames;
+    const key = (f) => `${f.layer.type === 'symbol' ? 'label' : 'line'}:${f.id}`;
+    m.on('render', () => {
+        const layers = [...l.visibleLayerIds, ...labelIds.filter((id) => m.getLayer(id))];
+        const all = {};
+        const zoom = m.getZoom();
+        for (const f of m.queryRenderedFeatures({layers})) {
+            const p = f.properties;
+            // A label also fades in over LABEL_FADE_IN zooms above its own first zoom (min_zoom).
+            const own = f.layer.type === 'symbol'
+                ? Math.max(0, Math.min(1, (zoom - (p.min_zoom ?? -1)) / LABEL_FADE_IN)) : (p.morph_fade ?? 1);
+            all[key(f)] = [p.fade_zoom, p.hide_zoom, own];
+        }
+        const middle = [...new Set(m.queryRenderedFeatures(box, {layers}).map(key))];
+        frames.push({zoom, all, middle});
+    });
+}"""
+
+
+def opacity(seen: list[float], zoom: float) -> float:
+    """How strongly a feature is drawn at a zoom: the style's ramp (docs/clients.md) times its own part: a line's
+    ``morph_fade`` (a contour CCSM lets vanish at its scale narrows to nothing over half a level), a label's fade
+    in above its own first zoom."""
+    fade, hide, morph_fade = seen
+    if hide is None or hide < 0 or zoom >= fade:
+        return float(morph_fade)
+    if zoom <= hide:
+        return 0.0
+    return morph_fade * (2 ** (zoom - hide) - 1) / (2 ** (fade - hide) - 1)
+
+
+def pops(frames: list[dict]) -> list[str]:
+    """Lines and labels in the middle box of one frame that the other frame does not show anywhere, while
+    drawn above FADE_EPS: appeared (new in the later frame) or went (gone from it)."""
+    out = []
+    for a, b in zip(frames, frames[1:], strict=False):
+        for k in b["middle"]:
+            if k not in a["all"] and opacity(b["all"][k], b["zoom"]) > FADE_EPS:
+                out.append(f"{k} appeared at zoom {b['zoom']:.3f}, opacity {opacity(b['all'][k], b['zoom']):.2f}")
+        for k in a["middle"]:
+            if k not in b["all"] and opacity(a["all"][k], a["zoom"]) > FADE_EPS:
+                out.append(f"{k} went at zoom {b['zoom']:.3f}, from opacity {opacity(a['all'][k], a['zoom']):.2f}")
+    return out
+
+
+def test_wheel_zoom_across_three_levels_shows_nothing_new_except_by_fading(app):
+    app.open()
+    state = app.page.evaluate("() => window.ccsm.cartography")
+    assert state["labelLayerIds"] and app.page.evaluate("() => window.ccsm.layers.main.state().plugin")
+    centre, _ = centre_and_bounds(app.base_url)
+    app.jump(center=centre, zoom=12.6)
+    app.wait_settled()
+    canvas = app.page.locator("#maps canvas").first.bounding_box()
+    w, h = canvas["width"], canvas["height"]
+    middle = [[w * MIDDLE_LO, h * MIDDLE_LO], [w * MIDDLE_HI, h * MIDDLE_HI]]
+    app.page.evaluate(RECORD_JS, [state["labelLayerIds"], middle, LABEL_FADE_IN_ZOOMS])
+    app.page.mouse.move(canvas["x"] + w / 2, canvas["y"] + h / 2)
+    for direction, until in ((1, 9.6), (-1, 12.5)):
+        for _ in range(200):
+            zoom = app.page.evaluate("() => window.ccsm.maps.a.getZoom()")
+            if (zoom <= until) if direction > 0 else (zoom >= until):
+                break
+            # Small wheel steps, given time: the plugin draws the steps it keeps up with, and recording every
+            # frame slows the page (a step skipped under load is a jump of the geometry, not of the style).
+            app.page.mouse.wheel(0, 40 * direction)
+            app.page.wait_for_timeout(250)
+        app.wait_settled(90)
+    frames = app.page.evaluate("() => window.__frames")
+    zooms = [f["zoom"] for f in frames]
+    assert min(zooms) <= 9.7 and max(zooms) >= 12.4 and len(frames) > 20, (min(zooms), max(zooms), len(frames))
+    # The middle box of one frame is on screen in the next as long as a frame zooms by less than log2(1 / 0.4).
+    assert max(abs(a - b) for a, b in zip(zooms, zooms[1:], strict=False)) < 1.0
+    # The recording saw fading: features at partial opacity on the way.
+    partial = [o for f in frames for fh in f["all"].values() if 0 < (o := opacity(fh, f["zoom"])) < 1]
+    assert len(partial) > 50, len(partial)
+    problems = pops(frames)
+    assert not problems, f"{len(problems)} pops in {len(frames)} frames, first: {problems[:8]}"

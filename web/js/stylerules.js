@@ -1,0 +1,43 @@
+// The service's style.json (GET /styles/{id}/style.json) taken apart for this page: its hillshade, its
+// contour line layers (drawn by the morphing layer, so they keep their fade and index weight) and its label
+// layers (drawn from the per-level tiles: label anchors are fixed, so they need no morph). Pure functions.
+
+/** The URL of a dataset's style. */
+export function styleUrl(datasetId) {
+  return `/styles/${encodeURIComponent(datasetId)}/style.json`;
+}
+
+/** The style's hillshade as {sourceId, source, layer}, or null when the dataset has no DEM. */
+export function hillshadeOf(style) {
+  const layer = style?.layers?.find((l) => l.type === 'raster');
+  if (!layer) return null;
+  const source = style.sources?.[layer.source];
+  if (!source) return null;
+  return {sourceId: layer.source, source, layer};
+}
+
+/** The contour source id of the style (the vector source the line and label layers read). */
+export function contourSourceId(style) {
+  const line = style?.layers?.find((l) => l.type === 'line');
+  return line?.source ?? null;
+}
+
+/**
+ * The style's contour line layers without their source, for the morphing layer. A contour that appears
+ * inside a zoom level grows in: its width is multiplied by the plugin's `morph_fade` (0 ... 1).
+ */
+export function contourLineLayers(style) {
+  const lines = (style?.layers ?? []).filter((l) => l.type === 'line' && l['source-layer'] === 'contours');
+  return lines.map((l) => {
+    const rest = {...l};
+    delete rest.source;
+    const width = l.paint?.['line-width'] ?? 1;
+    return {...rest, paint: {...l.paint, 'line-width': ['*', width, ['coalesce', ['get', 'morph_fade'], 1]]}};
+  });
+}
+
+/** The style's label layers, reading from `sourceId`. */
+export function labelLayers(style, sourceId) {
+  const labels = (style?.layers ?? []).filter((l) => l.type === 'symbol' && l['source-layer'] === 'contour_labels');
+  return labels.map((l) => ({...l, source: sourceId}));
+}

@@ -1,0 +1,54 @@
+import assert from 'node:assert/strict';
+import {test} from 'node:test';
+
+import {contourLineLayers, contourSourceId, hillshadeOf, labelLayers, styleUrl} from '../js/stylerules.js';
+
+const STYLE = {
+  version: 8,
+  glyphs: 'http://h/fonts/{fontstack}/{range}.pbf',
+  sources: {
+    'ccsm-contours': {type: 'vector', url: 'http://h/tiles/s/tilejson.json'},
+    'ccsm-hillshade': {type: 'raster', tiles: ['http://h/hillshade/s/{z}/{x}/{y}.png'], tileSize: 256},
+  },
+  layers: [
+    {id: 'background', type: 'background'},
+    {id: 'hillshade', type: 'raster', source: 'ccsm-hillshade', paint: {'raster-opacity': 0.4}},
+    {
+      id: 'contours-rank-0',
+      type: 'line',
+      source: 'ccsm-contours',
+      'source-layer': 'contours',
+      filter: ['==', ['get', 'rank'], 0],
+      paint: {'line-width': 0.7, 'line-opacity': ['interpolate', ['exponential', 2], ['zoom'], 11, 0, 12, 1]},
+    },
+    {id: 'contour-labels-rank-0', type: 'symbol', source: 'ccsm-contours', 'source-layer': 'contour_labels'},
+  ],
+};
+
+test('styleUrl escapes the dataset id', () => {
+  assert.equal(styleUrl('a b'), '/styles/a%20b/style.json');
+});
+
+test('hillshadeOf finds the raster layer and its source; null without one', () => {
+  const h = hillshadeOf(STYLE);
+  assert.equal(h.sourceId, 'ccsm-hillshade');
+  assert.equal(h.layer.id, 'hillshade');
+  assert.equal(h.source.tiles[0], 'http://h/hillshade/s/{z}/{x}/{y}.png');
+  assert.equal(hillshadeOf({...STYLE, layers: STYLE.layers.filter((l) => l.type !== 'raster')}), null);
+});
+
+test('contour lines lose their source, keep filter and fade, and grow in with morph_fade', () => {
+  const [line] = contourLineLayers(STYLE);
+  assert.equal(line.source, undefined);
+  assert.deepEqual(line.filter, ['==', ['get', 'rank'], 0]);
+  assert.deepEqual(line.paint['line-opacity'], STYLE.layers[2].paint['line-opacity']);
+  assert.deepEqual(line.paint['line-width'], ['*', 0.7, ['coalesce', ['get', 'morph_fade'], 1]]);
+  assert.equal(contourSourceId(STYLE), 'ccsm-contours');
+});
+
+test('labels read from the given source', () => {
+  const [label] = labelLayers(STYLE, 'page-labels');
+  assert.equal(label.source, 'page-labels');
+  assert.equal(label['source-layer'], 'contour_labels');
+  assert.equal(labelLayers({layers: []}, 'x').length, 0);
+});
