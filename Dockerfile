@@ -26,6 +26,10 @@ ENV PATH=/opt/venv/bin:$PATH \
     NUMBA_CACHE_DIR=/tmp/numba \
     CCSM_STORE_PATH=/data/ccsm.sqlite \
     CCSM_WEB_DIR=/app/web
+# The label glyphs (/fonts/...) are drawn from DejaVu Sans (CCSM_FONT_PATH's default).
+RUN apt-get update \
+ && apt-get install -y --no-install-recommends fonts-dejavu-core \
+ && rm -rf /var/lib/apt/lists/*
 RUN groupadd --system --gid 10001 ccsm \
  && useradd --system --uid 10001 --gid ccsm --home-dir /app --shell /usr/sbin/nologin ccsm \
  && mkdir -p /data /app \
