@@ -92,12 +92,14 @@ def test_maplibre_parser_decodes_tiles(live, tmp_path):
     tiles = json.loads(out.stdout)
     assert len(tiles) == 4
     for t in tiles:
-        assert t["layers"] == ["contours"] and t["version"] == 2 and t["extent"] == 4096
+        assert t["layers"][0] == "contours" and set(t["layers"]) <= {"contours", "contour_labels"}
+        assert t["version"] == 2 and t["extent"] == 4096
         assert t["features"]
         for f in t["features"]:
             assert f["type"] == 2  # LineString
             assert isinstance(f["id"], int)
-            assert set(f["properties"]) == {"elevation", "index", "t"}
+            # The contract of docs/design.md section 9: the cartography attributes beside elevation, index, t.
+            assert set(f["properties"]) == {"elevation", "index", "t", "level", "rank", "fade_zoom", "hide_zoom"}
             for line in f["geometry"]:
                 assert len(line) >= 2
                 assert all(-64 <= px <= 4160 and -64 <= py <= 4160 for px, py in line)
