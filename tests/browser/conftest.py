@@ -182,6 +182,11 @@ class Watch:
     def tile_requests(self) -> list[str]:
         return [u for u in self.requests if ".mvt" in u]
 
+    def geometry_tile_requests(self) -> list[str]:
+        """Tile requests without the page's label tiles: those are per-level tiles named by the style's source
+        (``/tiles/...`` with no query but ``v``), asked at integer zooms only, since label anchors never move."""
+        return [u for u in self.tile_requests() if "/morph/" in u or set(httpx.URL(u).params) - {"v"}]
+
 
 @dataclass
 class App:

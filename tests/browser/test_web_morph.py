@@ -65,17 +65,17 @@ def test_zoom_in_eighths_morphs_progressively(app):
     )
     frames = []
     for zoom in STEPS:
-        before = len(app.watch.tile_requests())
+        before = len(app.watch.geometry_tile_requests())
         app.jump(center=centre, zoom=zoom)
         app.wait_settled()
         assert app.page.evaluate("() => window.ccsm.layers.main.active.q") == zoom
-        new_tiles = app.watch.tile_requests()[before:]
+        new_tiles = app.watch.geometry_tile_requests()[before:]
         # The plugin draws every step of a level from the morph tiles it already has: the steps inside the
         # level ask for nothing, and no morph tile is ever fetched twice.
         if 11 < zoom < 12:
             assert new_tiles == [], (zoom, new_tiles[:3])
         assert all("/morph/" in u for u in new_tiles), new_tiles[:3]
-        tiles = app.watch.tile_requests()
+        tiles = app.watch.geometry_tile_requests()
         assert len(tiles) == len(set(tiles)), "a morph tile was fetched twice"
         frames.append(frame_points(app.rendered_lines(bbox=[w, s, e, n]), box))
 
