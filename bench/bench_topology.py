@@ -144,7 +144,9 @@ def tile_table(source: Path, smallest: float, largest: float) -> None:
                     if pairs:
                         drawn = {
                             c.fid: c.coords_3857
-                            for c in simplify(renderer, "bench", renderer.scale_of_tile(tile, zoom)).contours
+                            for c in simplify(
+                                renderer, "bench", renderer.scale_of_tile(tile, zoom), all_levels=True
+                            ).contours
                         }
                         exact += sum(1 for a, b in pairs if crossing_pairs([drawn[a], drawn[b]]))
             print(f"{z:>5} {tiles:>6} {crossing:>9} {exact:>11}")

@@ -89,7 +89,7 @@ def test_simplify_leaves_no_new_meeting_pair_at_any_scale(served: tuple[Renderer
     allowed = met_in_input(renderer, dataset)
     bad = {}
     for scale in scales_to_check(renderer, dataset):
-        drawn = simplify(renderer, dataset, float(scale)).contours
+        drawn = simplify(renderer, dataset, float(scale), all_levels=True).contours
         found = {(drawn[a].fid, drawn[b].fid) for a, b in crossing_pairs([c.coords_3857 for c in drawn])}
         if new := new_pairs(found, allowed):
             bad[round(float(scale))] = len(new)
@@ -136,7 +136,7 @@ def tile_unit_m(renderer: Renderer, z: int) -> float:
 
 def exact_gaps_m(renderer: Renderer, dataset: str, scale: float, pairs: set[tuple[int, int]]) -> list[float]:
     """Distance, metres in EPSG:3857, between the exact (unquantised) served slices of each pair at a scale."""
-    lines = {c.fid: c.coords_3857 for c in simplify(renderer, dataset, scale).contours}
+    lines = {c.fid: c.coords_3857 for c in simplify(renderer, dataset, scale, all_levels=True).contours}
     return [float(shapely.distance(shapely.linestrings(lines[a]), shapely.linestrings(lines[b]))) for a, b in pairs]
 
 
