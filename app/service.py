@@ -29,7 +29,7 @@ from engine.serve.build_job import BuildJob
 from engine.serve.datasets import RELIEF_DEM_KEY, SourceSpec, build_lock, slugify, source_hash
 from engine.serve.relief import ReliefCache
 from engine.serve.renderer import Renderer, TileOptions
-from engine.store.sqlite import CCSStore, DatasetInfo, unwritable_reason
+from engine.store.sqlite import CCSStore, DatasetInfo, pid_alive, unwritable_reason
 from engine.tiles.grid import mercator_to_lonlat
 from engine.tiles.scale import zoom_for_scale
 
@@ -249,7 +249,7 @@ class DatasetService:
         for path in self.upload_dir.glob("*.geojson"):
             if path.name.startswith(INCOMING_PREFIX):
                 pid = path.name[len(INCOMING_PREFIX) :].split("-", 1)[0]
-                if pid.isdigit() and _pid_alive(int(pid)):
+                if pid.isdigit() and pid_alive(int(pid)):
                     continue
             elif path.name.rsplit("-", 1)[0] in live:
                 continue
@@ -497,16 +497,6 @@ def _free_bytes(folder: Path) -> int | None:
     except OSError:
         return None
     return usage.f_bavail * usage.f_frsize
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def lonlat_bounds(info: DatasetInfo) -> list[float]:

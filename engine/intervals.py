@@ -41,3 +41,20 @@ def is_index(elevation: float, interval: float | None) -> bool:
         return False
     q = elevation / (INDEX_EVERY * interval)
     return abs(q - round(q)) < 1e-6
+
+
+#: Spellings of the two vertical units, in user options and in rasters' metadata, by the unit they name.
+UNIT_NAMES = {
+    "m": "m",
+    "metre": "m",
+    "meter": "m",
+    "metres": "m",
+    "meters": "m",
+    "ft": "ft",
+    "foot": "ft",
+    "feet": "ft",
+    "us survey foot": "ft",
+    "foot_us": "ft",
+    "us-ft": "ft",
+    "ftus": "ft",
+}

@@ -96,6 +96,10 @@ SourceScaleOption = Annotated[float, typer.Option("--source-scale", help="Scale 
 TargetScaleOption = Annotated[
     float, typer.Option("--target-scale", help="Scale denominator of the CCS's target (t = 1).")
 ]
+ElevationFieldOption = Annotated[
+    str | None,
+    typer.Option("--elevation-field", help="Elevation attribute of a contour file (found by name if omitted)."),
+]
 IntervalOption = Annotated[
     float | None, typer.Option("--interval", help="Contour interval of a DEM source, in its vertical unit.")
 ]
@@ -153,10 +157,7 @@ def simplify(
     ] = "ccsm",
     source_scale: SourceScaleOption = 50_000.0,
     target_scale: TargetScaleOption = 500_000.0,
-    elevation_field: Annotated[
-        str | None,
-        typer.Option("--elevation-field", help="Elevation attribute of a contour file (found by name if omitted)."),
-    ] = None,
+    elevation_field: ElevationFieldOption = None,
     interval: IntervalOption = None,
     crs: Annotated[str, typer.Option("--crs", help="Output CRS: 4326 (GeoJSON default), 3857 or source.")] = "4326",
     workers: Annotated[int | None, typer.Option("--workers", help="Worker processes (default: one per core).")] = None,

@@ -26,6 +26,7 @@ from app.cli import app
 from app.cli.commands_engine import (
     AttributeNamesOption,
     AttributionOption,
+    ElevationFieldOption,
     IndexEveryOption,
     IntervalOption,
     ScheduleOption,
@@ -113,10 +114,7 @@ def export(
     ] = None,
     source_scale: SourceScaleOption = 50_000.0,
     target_scale: TargetScaleOption = 500_000.0,
-    elevation_field: Annotated[
-        str | None,
-        typer.Option("--elevation-field", help="Elevation attribute of a contour file (found by name if omitted)."),
-    ] = None,
+    elevation_field: ElevationFieldOption = None,
     interval: IntervalOption = None,
     units: UnitsOption = None,
     index_every: IndexEveryOption = 5,

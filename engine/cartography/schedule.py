@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from engine.errors import InvalidParameter
-from engine.intervals import ELEVATION_DECIMALS, INDEX_EVERY
+from engine.intervals import ELEVATION_DECIMALS, INDEX_EVERY, UNIT_NAMES
 from engine.tiles.scale import zoom_for_scale
 
 #: Mantissas of the usual contour-interval series (1, 2, 2.5, 5, 10, 20, 25, 50, 100, ...).
@@ -115,20 +115,8 @@ class Schedule:
 
 def check_units(units: object) -> str:
     """``units`` if it is "m" or "ft" (case and spelling variants accepted), else raise naming it."""
-    aliases = {
-        "m": "m",
-        "metre": "m",
-        "meter": "m",
-        "metres": "m",
-        "meters": "m",
-        "ft": "ft",
-        "foot": "ft",
-        "feet": "ft",
-        "us-ft": "ft",
-        "us survey foot": "ft",
-    }
-    if isinstance(units, str) and units.strip().lower() in aliases:
-        return aliases[units.strip().lower()]
+    if isinstance(units, str) and units.strip().lower() in UNIT_NAMES:
+        return UNIT_NAMES[units.strip().lower()]
     raise InvalidParameter(f"units must be one of {', '.join(UNITS)}, got {units!r}")
 
 

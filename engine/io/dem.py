@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from rasterio.errors import RasterioError
 
 from engine.errors import InvalidParameter, SourceError
+from engine.intervals import UNIT_NAMES
 from engine.io.crs import WGS84, parse_crs
 from engine.io.vector import LineParts, assemble_contours
 from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
@@ -400,23 +401,6 @@ def _close_touching_rings(
     return uv, counts + touching.astype(np.int64)
 
 
-#: Unit names a raster's metadata may use for its heights.
-_UNIT_NAMES = {
-    "m": "m",
-    "metre": "m",
-    "meter": "m",
-    "metres": "m",
-    "meters": "m",
-    "ft": "ft",
-    "foot": "ft",
-    "feet": "ft",
-    "us survey foot": "ft",
-    "foot_us": "ft",
-    "us-ft": "ft",
-    "ftus": "ft",
-}
-
-
 def dem_vertical_units(path: str | os.PathLike[str]) -> str | None:
     """The vertical unit of a DEM from its metadata ("m" or "ft"), or None when it says none.
 
@@ -437,11 +421,11 @@ def dem_vertical_units(path: str | os.PathLike[str]) -> str | None:
             wkt = src.crs.to_wkt() if src.crs is not None else None
     except RasterioError as exc:
         raise SourceError(f"{path}: cannot read DEM ({exc})") from exc
-    if band_unit and band_unit.strip().lower() in _UNIT_NAMES:
-        return _UNIT_NAMES[band_unit.strip().lower()]
+    if band_unit and band_unit.strip().lower() in UNIT_NAMES:
+        return UNIT_NAMES[band_unit.strip().lower()]
     if wkt:
         crs = pyproj.CRS.from_wkt(wkt)
         vertical = [c for c in crs.sub_crs_list if c.is_vertical] if crs.is_compound else []
         if vertical and vertical[0].axis_info:
-            return _UNIT_NAMES.get(vertical[0].axis_info[0].unit_name.strip().lower())
+            return UNIT_NAMES.get(vertical[0].axis_info[0].unit_name.strip().lower())
     return None

@@ -284,7 +284,8 @@ def unwritable_reason(exc: BaseException) -> str | None:
     return None
 
 
-def _pid_alive(pid: int) -> bool:
+def pid_alive(pid: int) -> bool:
+    """Whether a process of this id runs on this machine (one we may not signal counts as running)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -698,7 +699,7 @@ class CCSStore:
         out = {}
         for r in self._con().execute("SELECT * FROM builds"):
             status = BuildStatus(*r)
-            if status.state == "building" and status.host == _host() and not _pid_alive(status.pid):
+            if status.state == "building" and status.host == _host() and not pid_alive(status.pid):
                 status = BuildStatus(
                     status.dataset,
                     "failed",
