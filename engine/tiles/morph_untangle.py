@@ -91,9 +91,7 @@ def meeting_owners(parts: MorphParts, w: NDArray[np.float64], held: NDArray[np.b
     return found
 
 
-def untangle(
-    parts: MorphParts, w: NDArray[np.float64], snap: Callable[[], MorphParts]
-) -> tuple[MorphParts, int]:
+def untangle(parts: MorphParts, w: NDArray[np.float64], snap: Callable[[], MorphParts]) -> tuple[MorphParts, int]:
     """The morph tile's parts with every contour that would meet another while morphing held still.
 
     Parameters
