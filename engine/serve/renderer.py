@@ -320,7 +320,7 @@ class Renderer:
         level_end = self.scale_of_tile(tile, float(z + 1))
         pinned = how.honours_t and t_pin is not None
         lines = how.tile_lines(pack, idx, ts, scale, TileContext(info, self, level_end, pinned))
-        parts = self.cut(lines, bounds, box)
+        parts = self.cut(lines, bounds, box, snap=how.keeps_topology)
         if parts is None:
             return TileResult(None, 0, zoomf, scale)
         cs = idx[parts.owner]
@@ -427,18 +427,19 @@ class Renderer:
         """Rows less significant than half a grid unit cannot move the quantised line (tiles.significance)."""
         return 0.5 * (box.maxx - box.minx) / (self.options.extent + 2 * self.options.buffer_px)
 
-    def cut(self, drawn: TileLines, bounds: Bounds, box: Bounds) -> TileParts | None:
+    def cut(self, drawn: TileLines, bounds: Bounds, box: Bounds, snap: bool = True) -> TileParts | None:
         """The tile pipeline after the method: runs of rows that meet ``box``, sliced, thinned, quantised,
         clipped to the buffered tile; None when nothing is left.
 
         Plain rounding and thinning can make two lines closer than a grid unit cross; a tile where they do is
-        cut again by snap rounding, which cannot (:meth:`cut_snapped`, docs/design.md section 4.8).
+        cut again by snap rounding, which cannot (:meth:`cut_snapped`, docs/design.md section 4.8); ``snap`` False
+        leaves the tile as rounded (a method whose lines cross by themselves).
         """
         runs = runs_meeting(drawn, box)
         if runs is None:
             return None
         parts = self.cut_rounded(drawn, runs, bounds)
-        if parts is not None and self.options.snap_rounding:
+        if parts is not None and snap and self.options.snap_rounding:
             if lines_cross_in_grid(parts.pts, parts.part_len, np.repeat(parts.owner, parts.part_count)):
                 return self.cut_snapped(drawn, runs, bounds)
         return parts

@@ -25,9 +25,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from engine.ccsm.topology import SweepIndex
+from engine.ccsm.topology import SweepIndex, lines_cross_properly
 from engine.tiles.crossings import crossing_owner_pairs
 from engine.tiles.runs import ranges
+
+#: Frames per level the ccsm-morph plugin draws (web/plugin): the moments a held contour must not cross at.
+FRAMES_PER_LEVEL = 32
+#: Rounds of holding contours before a tile holds them all: each round rebuilds the sweep index, and a long
+#: chain of contours each meeting the next is cheaper to hold at once.
+MAX_ROUNDS = 3
 
 
 @dataclass(frozen=True)
@@ -70,6 +76,29 @@ def morph_weights(t_samples: NDArray[np.float64]) -> NDArray[np.float64]:
     return w
 
 
+def _cross_in_frames(
+    starts: list[NDArray[np.float64]],
+    ends: list[NDArray[np.float64]],
+    w: NDArray[np.float64],
+    owner: NDArray[np.int64],
+    i: int,
+    j: int,
+    k: int,
+) -> bool:
+    """Whether parts i and j, which meet somewhere in step k, cross properly in a frame the plugin draws there
+    (FRAMES_PER_LEVEL per level; lines that only touch on the grid need no holding)."""
+    per_step = FRAMES_PER_LEVEL // (w.shape[0] - 1)
+    for m in range(per_step + 1):
+        lam = m / per_step
+        wi = w[k, owner[i]] + lam * (w[k + 1, owner[i]] - w[k, owner[i]])
+        wj = w[k, owner[j]] + lam * (w[k + 1, owner[j]] - w[k, owner[j]])
+        a = starts[i] + wi * (ends[i] - starts[i])
+        b = starts[j] + wj * (ends[j] - starts[j])
+        if lines_cross_properly(a, b):
+            return True
+    return False
+
+
 def meeting_owners(parts: MorphParts, w: NDArray[np.float64], held: NDArray[np.bool_]) -> set[int]:
     """Contours not yet held that meet another contour at some moment of the level (one of the two moving)."""
     if len(parts.part_len) < 2:
@@ -81,9 +110,12 @@ def meeting_owners(parts: MorphParts, w: NDArray[np.float64], held: NDArray[np.b
     owner = parts.part_owner
     # The sweep finds lines that come to meet; lines crossing already at the start are found directly.
     pairs = crossing_owner_pairs(parts.start, parts.part_len, owner)
-    for k in range(w.shape[0] - 1):
+    steps = w.shape[0] - 1
+    for k in range(steps):
         for i, j in index.contacts(w[k][owner], w[k + 1][owner]):
-            pairs.add((int(owner[i]), int(owner[j])))
+            a, b = int(owner[i]), int(owner[j])
+            if a != b and (a, b) not in pairs and _cross_in_frames(starts, ends, w, owner, i, j, k):
+                pairs.add((a, b))
     found: set[int] = set()
     for a, b in pairs:
         if a != b and not (held[a] and held[b]):
@@ -112,10 +144,13 @@ def untangle(parts: MorphParts, w: NDArray[np.float64], snap: Callable[[], Morph
     held = np.zeros(w.shape[1], dtype=bool)
     current = parts
     snapped: MorphParts | None = None
-    while True:
+    for _ in range(MAX_ROUNDS):
         meeting = meeting_owners(current, w, held)
         if not meeting:
             return current, int(held.sum())
         held[list(meeting)] = True
         snapped = snap() if snapped is None else snapped
         current = MorphParts.joined(parts.of_owners(~held), snapped.of_owners(held))
+    # Still meeting after a few rounds: hold every contour, one snap-rounded drawing needs no more checks.
+    snapped = snap() if snapped is None else snapped
+    return snapped, w.shape[1]
