@@ -10,7 +10,11 @@ rendered at three fractional zooms: it prints the pairs apart in the input that 
 grid, and how many of them meet in the exact slices (the rest are lines closer than the grid's rounding,
 docs/design.md section 4.8).
 
-    python bench/bench_topology.py [SOURCE ...] [--synthetic] [--scales 20] [--tiles]
+With ``--render-times``, every tile of z8-z14 over the source is rendered in process with snap rounding off (plain
+rounding, as before issue 13) and on: per-level tiles at z and z + 0.5, and morph tiles; it prints render time
+p50/p95 of each and how many tiles came out different (snap-rounded tiles, morph tiles with contours held).
+
+    python bench/bench_topology.py [SOURCE ...] [--synthetic] [--scales 20] [--tiles] [--render-times]
 
 ``--synthetic`` adds two contour sets made like GDAL's (tests/synthetic_rasters.py): lines of one level touching at
 saddles, at 10 m, and a dense 2 m interval.
@@ -34,7 +38,7 @@ from engine.ccsm.regression import t_for_scale
 from engine.ccsm.topology import INPUT_TOUCH_M, crossing_pairs, proper_crossing_pairs
 from engine.geom.polyline import closed_path
 from engine.serve.datasets import SourceSpec, build_dataset
-from engine.serve.renderer import Renderer
+from engine.serve.renderer import Renderer, TileOptions
 from engine.serve.simplify import simplify
 from engine.store.sqlite import CCSStore
 from engine.tiles.grid import tiles_covering
@@ -152,6 +156,40 @@ def tile_table(source: Path, smallest: float, largest: float) -> None:
             print(f"{z:>5} {tiles:>6} {crossing:>9} {exact:>11}")
 
 
+def render_times(source: Path, zooms: range) -> None:
+    """Render time of every tile of ``zooms`` with snap rounding off and on (in process, warm caches)."""
+    with tempfile.TemporaryDirectory() as folder:
+        store = CCSStore(Path(folder) / "bench.sqlite")
+        build_dataset(store, SourceSpec(source, "bench", "bench"))
+        variants = {flag: Renderer(store, TileOptions(snap_rounding=flag)) for flag in (False, True)}
+        info = variants[True].info("bench")[0]
+        tiles = [t for z in zooms for t in tiles_covering(Bounds(*info.bounds_3857), z)]
+        for r in variants.values():  # pack, labels and compiled kernels ready before timing
+            r.tile("bench", *tiles[0])
+            r.morph_tile("bench", *tiles[0])
+        times: dict[tuple[str, bool], list[float]] = {}
+        differ = dict.fromkeys(("tile", "morph"), 0)
+        for tile in tiles:
+            for kind in ("tile", "morph"):
+                for zoom in (tile.z, tile.z + 0.5) if kind == "tile" else (None,):
+                    data = {}
+                    for flag, r in variants.items():
+                        start = time.perf_counter()
+                        result = r.tile("bench", *tile, zoom=zoom) if kind == "tile" else r.morph_tile("bench", *tile)
+                        times.setdefault((kind, flag), []).append(time.perf_counter() - start)
+                        data[flag] = result.data
+                    differ[kind] += data[False] != data[True]
+        print(f"\n{source.name}: render time in process, z{zooms.start}-z{zooms.stop - 1}, {len(tiles)} tiles")
+        for (kind, flag), values in sorted(times.items()):
+            ms = np.array(values) * 1000
+            what = f"{kind}s, snap rounding {'on' if flag else 'off'}"
+            print(
+                f"{what:>28}: p50 {np.percentile(ms, 50):6.2f} ms  p95 {np.percentile(ms, 95):6.2f} ms  "
+                f"max {ms.max():7.1f} ms  (n = {len(ms)})"
+            )
+        print(f"tiles that differ: {differ['tile']} per-level tiles (snap-rounded), {differ['morph']} morph tiles")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("sources", nargs="*", type=Path)
@@ -160,6 +198,7 @@ def main() -> None:
     parser.add_argument("--min-scale", type=float, default=50_000.0, help="largest scale's denominator")
     parser.add_argument("--max-scale", type=float, default=500_000.0, help="smallest scale's denominator")
     parser.add_argument("--tiles", action="store_true", help="also count proper crossings in the tiles")
+    parser.add_argument("--render-times", action="store_true", help="tile render times, snap rounding off and on")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as folder:
         sources = list(args.sources) or ([] if args.synthetic else [sample_contours_path()])
@@ -167,6 +206,9 @@ def main() -> None:
             sources += synthetic_sources(Path(folder))
         scales = np.geomspace(args.min_scale, args.max_scale, args.scales)
         for source in sources:
+            if args.render_times:
+                render_times(Path(source), range(8, 15))
+                continue
             scale_table(Path(source), scales)
             if args.tiles:
                 tile_table(Path(source), args.max_scale, args.min_scale)

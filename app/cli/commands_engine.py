@@ -27,7 +27,9 @@ from engine.types import BadFeature
 
 if TYPE_CHECKING:
     from engine.cartography.options import CartographyOptions
+    from engine.evaluation.topology import ScaleTopology
     from engine.store.sqlite import CCSStore, DatasetInfo
+    from engine.types import ContourSet
 
 err_console = Console(stderr=True)
 console = Console()
@@ -312,10 +314,18 @@ def evaluate(
     ] = None,
     interval: Annotated[float | None, typer.Option("--interval", help="Contour interval of a DEM source.")] = None,
     workers: Annotated[int | None, typer.Option("--workers", help="Worker processes (default: one per core).")] = None,
+    topology_scales: Annotated[
+        int,
+        typer.Option(
+            "--topology-scales",
+            help="Count the pairs apart in the input that touch or cross at this many scales from the source "
+            "scale to twice the target scale, per method (0: skip).",
+        ),
+    ] = 10,
 ) -> None:
     """Compare CCSM with DP, WM and VW as the paper's section 3.2 does; write tables and figures."""
     from engine.evaluation.pipeline import evaluate_set
-    from engine.evaluation.report import write_report
+    from engine.evaluation.report import write_report, write_topology
     from engine.io.source import read_source
 
     target = target.strip().lower()
@@ -327,6 +337,7 @@ def evaluate(
         ("--levels", levels, 2),
         ("--crossing-step", crossing_step, 1),
         ("--table-contours", table_contours, 0),
+        ("--topology-scales", topology_scales, 0),
     ):
         if value < low:
             fail(f"{name} must be >= {low}, got {value}")
@@ -360,8 +371,11 @@ def evaluate(
                 table_contours=table_contours,
                 progress=report,
             )
+            topology = _scale_topology(contour_set, topology_scales, source_scale, target_scale, workers)
         runtime = time.perf_counter() - started
         written = write_report(ev, out, source=str(source), runtime_s=runtime)
+        if topology is not None:
+            written.append(write_topology(topology, out))
     if ev.bad_features:
         err_console.print(_bad_feature_table(ev.bad_features, limit=50))
     mean = ev.mean_curve()
@@ -379,3 +393,33 @@ def evaluate(
         highlight=False,
         soft_wrap=True,
     )
+    if topology is not None:
+        console.print(_topology_table(topology))
+
+
+def _scale_topology(
+    contour_set: ContourSet, n_scales: int, source_scale: float, target_scale: float, workers: int | None
+) -> ScaleTopology | None:
+    """``evaluate --topology-scales``: the per-scale topology counts, or None when asked for none."""
+    from engine.evaluation.topology import topology_by_scale, topology_scales
+
+    if not n_scales:
+        return None
+    scales = topology_scales(source_scale, target_scale, n_scales)
+    return topology_by_scale(
+        contour_set, scales, source_scale=source_scale, target_scale=target_scale, workers=workers
+    )
+
+
+def _topology_table(topology: ScaleTopology) -> Table:
+    """The per-scale topology counts as a console table."""
+    table = Table(
+        title=f"pairs apart in the input that touch or cross ({topology.input_pairs} pairs meeting in the input "
+        "left out; ccsm as served)"
+    )
+    table.add_column("scale", justify="right")
+    for method in topology.methods:
+        table.add_column(method, justify="right")
+    for scale, *counts in topology.rows():
+        table.add_row(f"1:{scale:,.0f}", *(str(c) for c in counts))
+    return table

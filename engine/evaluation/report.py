@@ -13,6 +13,7 @@ import numpy as np
 
 from engine.evaluation.measures import SAME_SCALE_WINDOW
 from engine.evaluation.pipeline import PAPER_METHODS, RISE_TOLERANCE, Evaluation, finite_mean, pooled_errors
+from engine.evaluation.topology import ScaleTopology
 
 LABELS = {"ccsm": "CCSM", "dp": "DP", "wm": "WM", "vw": "VW"}
 COLOURS = {"ccsm": "#e6a100", "dp": "#1f5fbf", "wm": "#2a9d3a", "vw": "#b03a8c"}
@@ -348,3 +349,20 @@ def _write_summary(
         lines.append("")
         lines.append(f"(The paper's Table 2 used the three methods {', '.join(LABELS[m] for m in PAPER_METHODS)}.)")
     path.write_text("\n".join(lines) + "\n")
+
+
+#: The file of the per-scale topology table (``ccsm evaluate --topology-scales``).
+TOPOLOGY_FILE = "topology_by_scale.csv"
+
+
+def write_topology(topology: ScaleTopology, out_dir: str | Path) -> Path:
+    """Write the pairs apart in the input that touch or cross, per scale and method, as CSV; returns its path."""
+    path = Path(out_dir) / TOPOLOGY_FILE
+    _write_csv(
+        path,
+        ["scale", *topology.methods],
+        ([round(row[0]), *row[1:]] for row in topology.rows()),
+        comment=f"pairs of contours apart in the input that touch or cross; {topology.contours} contours, "
+        f"{topology.input_pairs} pairs already meeting in the input left out; ccsm as served",
+    )
+    return path

@@ -81,6 +81,9 @@ class Method(ABC):
     name: ClassVar[str]
     #: Whether a hand-pinned t applies (only the continuous method has a t of its own).
     honours_t: ClassVar[bool] = False
+    #: Whether the method's lines never cross where the input's do not, so tiles keep that by snap rounding
+    #: (docs/design.md section 4.8); the per-scale baselines make crossings of their own.
+    keeps_topology: ClassVar[bool] = True
 
     def visible(self, pack: DatasetPack, idx: NDArray[np.intp], scale: float) -> NDArray[np.intp]:
         """The contours of ``idx`` drawn at a scale: small rings vanish where the map cannot show them."""
@@ -170,6 +173,8 @@ class BaselineMethod(Method):
     Results are computed in the working CRS (metres), at the scale rounded to 1/16 of a zoom level, and
     cached per (contour, step).
     """
+
+    keeps_topology = False
 
     def __init__(
         self,

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -29,11 +29,14 @@ from engine.serve.cache import LRUCache
 from engine.serve.methods import Method, TileContext, TileLines, make_methods
 from engine.serve.pack import PACK_BYTES_PER_VERTEX, DatasetPack
 from engine.store.sqlite import CCSStore, ContourRecord, DatasetInfo
-from engine.tiles.clip import clip_lines_fast
+from engine.tiles.clip import clip_lines_exact, clip_lines_fast
+from engine.tiles.crossings import lines_cross_in_grid
 from engine.tiles.grid import Tile, buffered, check_fractional_zoom, check_tile, tile_bounds, tile_center_latitude
+from engine.tiles.morph_untangle import MorphParts, morph_weights, untangle
 from engine.tiles.mvt import encode_line_tile, encode_point_tile
-from engine.tiles.runs import morph_runs, ranges, slice_runs
+from engine.tiles.runs import morph_runs, ranges, slice_runs, slice_runs_exact
 from engine.tiles.scale import scale_for_zoom, zoom_for_scale
+from engine.tiles.snap_round import snap_round
 from engine.types import Bounds
 
 #: Decimals of the ``t`` property (1e-4 of the source-to-target range is far below a pixel).
@@ -52,13 +55,15 @@ LABEL_BATCH = 512
 
 @dataclass(frozen=True)
 class TileOptions:
-    """How tiles are cut: grid size, buffer (grid units), layer name, served zoom range."""
+    """How tiles are cut: grid size, buffer (grid units), layer name, served zoom range, and whether tiles
+    where plain rounding makes lines cross are snap-rounded (always, but for tests that show what it guards)."""
 
     extent: int = 4096
     buffer_px: int = 64
     layer: str = "contours"
     min_zoom: int = 0
     max_zoom: int = 16
+    snap_rounding: bool = True
 
 
 @dataclass(frozen=True)
@@ -315,7 +320,7 @@ class Renderer:
         level_end = self.scale_of_tile(tile, float(z + 1))
         pinned = how.honours_t and t_pin is not None
         lines = how.tile_lines(pack, idx, ts, scale, TileContext(info, self, level_end, pinned))
-        parts = self.cut(lines, bounds, box)
+        parts = self.cut(lines, bounds, box, snap=how.keeps_topology)
         if parts is None:
             return TileResult(None, 0, zoomf, scale)
         cs = idx[parts.owner]
@@ -374,7 +379,13 @@ class Renderer:
         )
         if len(part_len) == 0:
             return TileResult(None, 0, float(z), float(scales[0]))
-        owners, counts = np.unique(run_owner[part_run], return_counts=True)
+        parts = MorphParts(q0, q1, part_len, run_owner[part_run])
+        if opts.snap_rounding:
+            parts = self.untangle_morph(parts, drawn, (a, b, run_owner), ts, bounds)
+            if len(parts.part_len) == 0:
+                return TileResult(None, 0, float(z), float(scales[0]))
+        q0, q1, part_len = parts.start, parts.end, parts.part_len
+        owners, counts = np.unique(parts.part_owner, return_counts=True)
         cs = idx[owners]
         vanish = pack.vanish[cs]
         finite = np.isfinite(vanish)  # an infinite vanishing scale: a line that never goes
@@ -390,23 +401,84 @@ class Renderer:
         labels = self.label_layer(dataset, tile)
         return TileResult(start + end + labels, len(cs), float(z), float(scales[0]))
 
+    def untangle_morph(
+        self,
+        parts: MorphParts,
+        drawn: TileLines,
+        runs: tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]],
+        ts: NDArray[np.float64],
+        bounds: Bounds,
+    ) -> MorphParts:
+        """The morph tile's parts with the contours that would meet while a client morphs them held still
+        (:mod:`engine.tiles.morph_untangle`), each at its snap-rounded shape at the level's end: every contour of
+        the tile is shown there (a ring may not be yet at the start), so the exact shapes do not meet."""
+
+        def snap() -> MorphParts:
+            cut = self.cut_snapped(replace(drawn, slice_t=ts[-1]), runs, bounds)
+            if cut is None:
+                empty = np.zeros((0, 2), dtype=np.int64)
+                return MorphParts(empty, empty, np.zeros(0, np.int64), np.zeros(0, np.int64))
+            return MorphParts(cut.pts, cut.pts, cut.part_len, np.repeat(cut.owner, cut.part_count))
+
+        w = morph_weights(np.round(ts, T_DECIMALS))  # the t a client reads: rounded as encoded
+        return untangle(parts, w, snap)[0]
+
     def min_significance(self, box: Bounds) -> float:
         """Rows less significant than half a grid unit cannot move the quantised line (tiles.significance)."""
         return 0.5 * (box.maxx - box.minx) / (self.options.extent + 2 * self.options.buffer_px)
 
-    def cut(self, drawn: TileLines, bounds: Bounds, box: Bounds) -> TileParts | None:
+    def cut(self, drawn: TileLines, bounds: Bounds, box: Bounds, snap: bool = True) -> TileParts | None:
         """The tile pipeline after the method: runs of rows that meet ``box``, sliced, thinned, quantised,
         clipped to the buffered tile; None when nothing is left.
+
+        Plain rounding and thinning can make two lines closer than a grid unit cross; a tile where they do is
+        cut again by snap rounding, which cannot (:meth:`cut_snapped`, docs/design.md section 4.8); ``snap`` False
+        leaves the tile as rounded (a method whose lines cross by themselves).
+        """
+        runs = runs_meeting(drawn, box)
+        if runs is None:
+            return None
+        parts = self.cut_rounded(drawn, runs, bounds)
+        if parts is not None and snap and self.options.snap_rounding:
+            if lines_cross_in_grid(parts.pts, parts.part_len, np.repeat(parts.owner, parts.part_count)):
+                return self.cut_snapped(drawn, runs, bounds)
+        return parts
+
+    def cut_snapped(
+        self, drawn: TileLines, runs: tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]], bounds: Bounds
+    ) -> TileParts | None:
+        """Every row of the runs sliced exactly, clipped to the buffered tile, then snap-rounded all together
+        (:mod:`engine.tiles.snap_round`): no two lines cross properly unless their exact slices do. Rows are
+        thinned only where they collapse into one grid point."""
+        opts = self.options
+        a, b, run_owner = runs
+        lines = drawn.lines
+        pts, plen = slice_runs_exact(a, b, drawn.slice_t[run_owner], lines.base, lines.top, bounds, opts.extent)
+        lo, hi = -opts.buffer_px, opts.extent + opts.buffer_px
+        c_pts, c_len, c_src = clip_lines_exact(pts, plen, lo, hi)
+        q, q_len, q_src = snap_round(c_pts, c_len)
+        if len(q_len) == 0:
+            return None
+        part_owner = run_owner[c_src[q_src]]
+        order = np.argsort(part_owner, kind="stable")
+        q_start = np.cumsum(q_len) - q_len
+        part_len = q_len[order]
+        out = q[ranges(q_start[order], q_start[order] + part_len)]
+        owners, counts = np.unique(part_owner, return_counts=True)
+        return TileParts(out, part_len, counts, owners)
+
+    def cut_rounded(
+        self, drawn: TileLines, runs: tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]], bounds: Bounds
+    ) -> TileParts | None:
+        """Runs sliced, thinned by significance and rounded to the grid one point at a time, then clipped.
 
         Every step runs over all the tile's lines at once; only the pieces crossing the buffered tile's edge
         are clipped.
         """
         opts = self.options
         lines = drawn.lines
-        runs = runs_meeting(drawn, box)
-        if runs is None:
-            return None
         a, b, run_owner = runs
+        box = buffered(bounds, opts.buffer_px, opts.extent)
         q, plen, pbox = slice_runs(
             a,
             b,

@@ -45,7 +45,7 @@ def _close(n, start, j, out_len, out_src, m):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _clip_kernel(q, plen, lo, hi, out, out_len, out_src):  # noqa: C901  # pragma: no cover - compiled, one loop nest
+def _clip_kernel(q, plen, lo, hi, out, out_len, out_src, to_grid):  # noqa: C901  # pragma: no cover - compiled, one loop nest
     n = 0
     m = 0
     s = 0
@@ -98,11 +98,11 @@ def _clip_kernel(q, plen, lo, hi, out, out_len, out_src):  # noqa: C901  # pragm
                     n, m = _close(n, start, j, out_len, out_src, m)
                 start = n
                 opened = True
-                out[n, 0] = np.int64(np.rint(ax))
-                out[n, 1] = np.int64(np.rint(ay))
+                out[n, 0] = np.rint(ax) if to_grid else ax
+                out[n, 1] = np.rint(ay) if to_grid else ay
                 n += 1
-            ix = np.int64(np.rint(bx))
-            iy = np.int64(np.rint(by))
+            ix = np.rint(bx) if to_grid else bx
+            iy = np.rint(by) if to_grid else by
             if ix != out[n - 1, 0] or iy != out[n - 1, 1]:
                 out[n, 0] = ix
                 out[n, 1] = iy
@@ -125,5 +125,19 @@ def clip_lines_fast(
     out = np.empty((2 * len(q) + 2, 2), dtype=np.int64)
     out_len = np.empty(len(q) + 1, dtype=np.int64)
     out_src = np.empty(len(q) + 1, dtype=np.int64)
-    n, m = _clip_kernel(q, lens, float(lo), float(hi), out, out_len, out_src)
+    n, m = _clip_kernel(q, lens, float(lo), float(hi), out, out_len, out_src, True)
+    return out[:n], out_len[:m], out_src[:m]
+
+
+def clip_lines_exact(
+    q: NDArray[np.float64], lens: NDArray[np.int64], lo: float, hi: float
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]:
+    """:func:`clip_lines_fast` of float polylines, keeping the cut points as they are (not rounded): the
+    pieces of exact lines that snap rounding then puts on the grid (engine.tiles.snap_round)."""
+    q = np.ascontiguousarray(q, dtype=np.float64)
+    lens = np.ascontiguousarray(lens, dtype=np.int64)
+    out = np.empty((2 * len(q) + 2, 2), dtype=np.float64)
+    out_len = np.empty(len(q) + 1, dtype=np.int64)
+    out_src = np.empty(len(q) + 1, dtype=np.int64)
+    n, m = _clip_kernel(q, lens, float(lo), float(hi), out, out_len, out_src, False)
     return out[:n], out_len[:m], out_src[:m]

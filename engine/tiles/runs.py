@@ -197,6 +197,31 @@ def slice_runs(
     return out[:n], plen, box
 
 
+def slice_runs_exact(
+    a: NDArray[np.int64],
+    b: NDArray[np.int64],
+    run_t: NDArray[np.float64],
+    base: NDArray[np.float64],
+    top: NDArray[np.float64],
+    bounds: Bounds,
+    extent: int,
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Every row of the runs sliced at ``run_t`` (as :func:`slice_runs` slices them), in float grid units, y
+    down, with no row left out and nothing rounded: the exact lines that snap rounding starts from.
+
+    Returns
+    -------
+    (pts, plen)
+        (N, 2) float64 points of all runs concatenated and each run's number of points.
+    """
+    rows = ranges(a, b)
+    t = np.repeat(np.asarray(run_t, dtype=np.float64), b - a)[:, None]
+    xy = np.where(t >= 1.0, top[rows], np.where(t <= 0.0, base[rows], base[rows] + t * (top[rows] - base[rows])))
+    k = extent / (bounds.maxx - bounds.minx)
+    pts = np.column_stack([(xy[:, 0] - bounds.minx) * k, (bounds.maxy - xy[:, 1]) * k])
+    return pts, (b - a).astype(np.int64)
+
+
 @njit(cache=True)
 def _segment_reaches(s0, s1, j, lo, hi):  # pragma: no cover - compiled
     # The segment's path through the level lies in the box of its two ends at both zooms.

@@ -194,9 +194,13 @@ def test_each_method_draws_its_own_simplification(client, zoom):
             drawn[method][f["id"]] = got
             on_edge = ((got == -BUFFER) | (got == EXTENT + BUFFER)).any(axis=1)
             vertices = got[~on_edge]  # the others are where clipping cut the line at the buffer's edge
-            # every drawn vertex is a vertex of the method's own line ...
+            # every drawn vertex is a vertex of the method's own line, or (in a tile snap-rounded because plain
+            # rounding crossed, issue 13) the centre of a grid pixel the line passes through ...
             gap = np.abs(vertices[:, None, :] - expected[None, :, :]).max(axis=2).min(axis=1)
-            assert gap.max() <= 1, (method, f["id"], gap.max())
+            exact = np.column_stack([(line[:, 0] - minx) * k, (miny + size - line[:, 1]) * k])
+            own = shapely.LineString(exact) if len(exact) >= 2 else shapely.Point(exact[0])
+            off_line = shapely.distance(own, shapely.points(vertices[gap > 1].astype(float)))
+            assert np.all(off_line <= math.sqrt(2) / 2 + 1e-9), (method, f["id"], gap.max())
             # ... and every vertex of that line inside the tile lies on the drawn line (rows thinned away by
             # significance move it by under half a grid unit, rounding by another).
             inside = expected[((expected >= 0) & (expected <= EXTENT)).all(axis=1)]

@@ -10,6 +10,7 @@ at the levels themselves, so lines of one level touch at saddle nodes (those pai
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import mapbox_vector_tile
 import numpy as np
@@ -125,7 +126,7 @@ def zooms_to_check(renderer: Renderer, dataset: str) -> list[tuple[int, float]]:
     return [(z, z + f) for z in range(low, high + 1) for f in (0.0, 0.3, 0.7)]
 
 
-#: Tile units two lines must be apart so that no served tile can show them crossing: rounding to the grid
+#: Tile units two lines must be apart so that plain rounding cannot draw them crossing: rounding to the grid
 #: moves a point by up to sqrt(2)/2 units, thinning by up to half a unit (docs/design.md section 4.8).
 QUANTISATION_REACH = 2 * (math.sqrt(2) / 2 + 0.5)
 
@@ -158,31 +159,36 @@ def served_crossings(renderer: Renderer, dataset: str, morph: bool) -> list[tupl
     return out
 
 
+def plain_rounding(renderer: Renderer) -> Renderer:
+    """A renderer of the same store that rounds every vertex on its own, as the service did before issue 13."""
+    return Renderer(renderer.store, replace(renderer.options, snap_rounding=False))
+
+
 @pytest.mark.parametrize("morph", [False, True], ids=["tiles", "morph"])
-def test_tiles_cross_only_where_quantisation_forces_it(served: tuple[Renderer, str], morph: bool) -> None:
-    # Lines apart in the exact served slices (the simplify test above) but closer than the quantisation's
-    # reach may be drawn crossing on the tile grid; anything else would be a crossing the service made.
+def test_plain_rounding_draws_lines_closer_than_the_grid_crossing(served: tuple[Renderer, str], morph: bool) -> None:
+    # What snap rounding is for: with plain rounding, lines apart in the exact served slices (the simplify test
+    # above) but closer than the quantisation's reach are drawn crossing on these data. So the test below can
+    # fail, and anything beyond that reach would be a crossing the service made by itself.
     renderer, dataset = served
+    plain = plain_rounding(renderer)
     checked = crossed = 0
-    for z, _zoom, scale, pairs in served_crossings(renderer, dataset, morph):
+    for z, _zoom, scale, pairs in served_crossings(plain, dataset, morph):
         checked += 1
         if not pairs:
             continue
         crossed += len(pairs)
-        gaps = np.array(exact_gaps_m(renderer, dataset, scale, pairs)) / tile_unit_m(renderer, z)
+        gaps = np.array(exact_gaps_m(plain, dataset, scale, pairs)) / tile_unit_m(plain, z)
         assert np.all(gaps > 0), f"z{z} 1:{scale:.0f}: pairs crossing in the exact slices: {sorted(pairs)}"
         assert np.all(gaps < QUANTISATION_REACH), f"z{z} 1:{scale:.0f}: crossing lines {gaps.max():.2f} units apart"
     assert checked > 20
+    assert crossed > 0
     print(f"{dataset} {'morph' if morph else 'tiles'}: {crossed} pairs crossing on the grid in {checked} tiles")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="not done (issue 13): rounding to the tile grid draws lines closer than one tile unit crossing at "
-    "z7-z9 on these data; the renderer would need topology-preserving rounding",
-)
 @pytest.mark.parametrize("morph", [False, True], ids=["tiles", "morph"])
 def test_tiles_have_no_proper_new_crossing_at_fractional_zooms(served: tuple[Renderer, str], morph: bool) -> None:
+    # Snap rounding in tiles where plain rounding crosses; contours held still in morph tiles where they would
+    # meet while morphing (docs/design.md section 4.8). Touching on the grid is allowed, crossing is not.
     renderer, dataset = served
     bad = [(z, zoom, sorted(p)[:3]) for z, zoom, _, p in served_crossings(renderer, dataset, morph) if p]
     assert not bad, f"contours apart in the input cross in served tiles: {bad}"
@@ -190,7 +196,11 @@ def test_tiles_have_no_proper_new_crossing_at_fractional_zooms(served: tuple[Ren
 
 def morph_lines(renderer: Renderer, dataset: str, tile, f: float) -> dict[int, list[np.ndarray]]:  # type: ignore[no-untyped-def]
     """The contours a morph tile draws at z + f, as docs/morph-tiles.md says a client draws them."""
-    morph = decode(renderer.morph_tile(dataset, *tile).data)
+    return morph_drawing(decode(renderer.morph_tile(dataset, *tile).data), tile.z, f)
+
+
+def morph_drawing(morph: dict, z: int, f: float) -> dict[int, list[np.ndarray]]:
+    """The contours of a decoded morph tile of zoom z drawn at z + f."""
     if not morph:
         return {}
     start = morph["contours"]
@@ -199,7 +209,7 @@ def morph_lines(renderer: Renderer, dataset: str, tile, f: float) -> dict[int, l
     lines = {}
     for fid, parts in tile_lines(start).items():
         p = props[fid]
-        if tile.z + f <= p.get("min_zoom", -1.0):
+        if z + f <= p.get("min_zoom", -1.0):
             continue
         w = 0.0 if p["t8"] == p["t"] else (morph_t(p, f) - p["t"]) / (p["t8"] - p["t"])
         lines[fid] = [a + w * (b - a) for a, b in zip(parts, end[fid], strict=True)]
@@ -211,3 +221,22 @@ def morph_t(props: dict, f: float) -> float:
     samples = [props["t"]] + [props[f"t{k}"] for k in range(1, 9)]
     k = min(int(8 * f), 7)
     return samples[k] + (8 * f - k) * (samples[k + 1] - samples[k])
+
+
+def test_morph_tiles_never_cross_at_the_plugins_steps(served: tuple[Renderer, str]) -> None:
+    # The ccsm-morph plugin draws 32 steps per level (web/plugin): every one of them, in every morph tile.
+    renderer, dataset = served
+    allowed = met_in_input(renderer, dataset)
+    bounds = Bounds(*renderer.info(dataset)[0].bounds_3857)
+    drawn = 0
+    bad = []
+    for z in sorted({z for z, _ in zooms_to_check(renderer, dataset)}):
+        for tile in tiles_covering(bounds, z):
+            morph = decode(renderer.morph_tile(dataset, *tile).data)
+            for step in range(32):
+                lines = morph_drawing(morph, z, step / 32)
+                drawn += bool(lines)
+                if pairs := proper_new_crossings(lines, allowed):
+                    bad.append((tile, step, sorted(pairs)[:3]))
+    assert drawn > 100
+    assert not bad, f"contours apart in the input cross in a morph tile (tile, step of 32, pairs): {bad}"
