@@ -23,7 +23,7 @@ from app.builds import BuildRunner
 from app.errors import BuildQueueFull, DatasetExists, MalformedUpload, log_safe
 from app.settings import Settings
 from engine.cartography.options import PARAMS_KEY as CARTOGRAPHY_KEY
-from engine.cartography.options import CartographyOptions
+from engine.cartography.options import CartographyOptions, check_schedule_fits
 from engine.errors import CCSMError, StoreError, StoreNotReady, StoreUnwritable, UnknownLayer
 from engine.serve.build_job import BuildJob
 from engine.serve.datasets import RELIEF_DEM_KEY, SourceSpec, build_lock, slugify, source_hash
@@ -290,6 +290,7 @@ class DatasetService:
             contour_set = read_source(
                 incoming, elevation_field=params.elevation_field, interval=params.interval
             )
+            check_schedule_fits(params.cartography, contour_set.interval, params.source_scale)
             ident = self._reserve(dataset, name, len(contour_set.contours), body, params)
             path = self.upload_dir / f"{ident}-{uuid.uuid4().hex[:8]}.geojson"
             incoming.rename(path)

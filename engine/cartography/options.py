@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from engine.cartography.schedule import check_index_every, check_units, parse_schedule
+from engine.cartography.schedule import check_index_every, check_units, make_schedule, parse_schedule
 from engine.errors import InvalidParameter
 from engine.intervals import INDEX_EVERY
 
@@ -85,3 +85,36 @@ class CartographyOptions:
             schedule=stored.get("schedule"),
             attribution=stored.get("attribution"),
         )
+
+
+def check_schedule_fits(options: CartographyOptions | None, interval: float | None, source_scale: float) -> None:
+    """Refuse a schedule override that is well formed but does not fit the data, before anything is built or
+    stored: its first step must divide the data's contour interval, and its first hide scale must lie beyond
+    the source scale (a rank has to be fully drawn at the source scale and fade over a range of scales).
+
+    Parameters
+    ----------
+    options
+        The dataset's cartography options (None or no override: nothing to check).
+    interval
+        The data's contour interval, in the options' units (None: a single level).
+    source_scale
+        Scale denominator of the data (where every level is fully drawn).
+
+    Raises
+    ------
+    InvalidParameter
+        Naming the ``schedule`` parameter, the entry and what is wrong with it.
+    """
+    if options is None or options.schedule is None:
+        return
+    checked = options.checked()
+    # The latitude only turns scales into zooms; whether the table fits does not depend on it.
+    make_schedule(
+        interval,
+        start_scale=source_scale,
+        latitude=0.0,
+        units=checked.units or "m",
+        index_every=checked.index_every,
+        override=checked.schedule,
+    )

@@ -257,6 +257,12 @@ def make_schedule(
                 f"schedule entry 1: step {pairs[0][0]:g} must divide the data's interval {base:g} {units}"
             )
         base = base or pairs[0][0]
+        first_hide = pairs[0][1]
+        if first_hide is not None and first_hide <= start_scale:
+            raise InvalidParameter(
+                f"schedule entry 1: hide scale {first_hide:g} must be larger than the source scale {start_scale:g} "
+                "(every level is fully drawn at the source scale)"
+            )
     else:
         if base is None:
             return Schedule(1.0, index_every, units, (Rank(0, 1.0, None, None, NEVER, NEVER),))

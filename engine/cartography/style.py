@@ -32,6 +32,10 @@ HALO_COLOR = "#f6f3ec"
 #: Line widths in CSS pixels: intermediate and index contours (index lines are drawn heavier).
 LINE_WIDTH_PX = 0.7
 INDEX_LINE_WIDTH_PX = 1.5
+#: Width of index lines once the base interval has faded out (the schedule's rank 0 is gone). They are then the
+#: finest lines on the map, so they need no emphasis over thinner neighbours; at 1.5 px they would double the
+#: ink per line just as the visible interval grows, and the map would darken as it zooms out (bench/bench_ink.py).
+INDEX_LINE_WIDTH_ALONE_PX = 0.9
 
 #: Label text size and halo width, CSS pixels.
 LABEL_SIZE_PX = 11.0
@@ -178,8 +182,27 @@ def _layer_minzoom(fade: RankFade) -> dict[str, float]:
     return {"minzoom": float(int(fade.hide_zoom))}
 
 
-def contour_line_layer(fade: RankFade) -> dict[str, Any]:
-    """The line layer of one rank: index contours (``level`` 1) heavier and darker than intermediate ones."""
+def line_width(base: RankFade) -> float | list[Any]:
+    """Line width as a MapLibre expression: index contours (``level`` 1) at INDEX_LINE_WIDTH_PX while the base
+    interval (rank 0, ``base``) is fully drawn, thinning to INDEX_LINE_WIDTH_ALONE_PX as it fades out, with the
+    same exponential base 2 ramp as its opacity; intermediate ones at LINE_WIDTH_PX.
+
+    >>> line_width(RankFade(0, 12.0, None))
+    ['case', ['==', ['to-number', ['get', 'level']], 1], 1.5, 0.7]
+    >>> line_width(RankFade(0, 12.0, 10.0))[:4]
+    ['interpolate', ['exponential', 2], ['zoom'], 10.0]
+    """
+    is_index = ["==", ["to-number", ["get", "level"]], 1]
+    heavy = ["case", is_index, INDEX_LINE_WIDTH_PX, LINE_WIDTH_PX]
+    if base.hide_zoom is None:
+        return heavy
+    alone = ["case", is_index, INDEX_LINE_WIDTH_ALONE_PX, LINE_WIDTH_PX]
+    return ["interpolate", ["exponential", 2], ["zoom"], base.hide_zoom, alone, base.fade_zoom, heavy]
+
+
+def contour_line_layer(fade: RankFade, base: RankFade | None = None) -> dict[str, Any]:
+    """The line layer of one rank: index contours (``level`` 1) heavier and darker than intermediate ones, as
+    long as the base interval (``base``, rank 0 of the schedule; default ``fade``) is drawn (:func:`line_width`)."""
     is_index = ["==", ["to-number", ["get", "level"]], 1]
     return {
         "id": f"contours-rank-{fade.rank}",
@@ -191,7 +214,7 @@ def contour_line_layer(fade: RankFade) -> dict[str, Any]:
         "layout": {"line-join": "round", "line-cap": "round"},
         "paint": {
             "line-color": ["case", is_index, INDEX_LINE_COLOR, LINE_COLOR],
-            "line-width": ["case", is_index, INDEX_LINE_WIDTH_PX, LINE_WIDTH_PX],
+            "line-width": line_width(base or fade),
             "line-opacity": fade_opacity(fade),
         },
     }
@@ -284,7 +307,7 @@ def build_style(src: StyleSource) -> dict[str, Any]:
                 "paint": {"raster-opacity": HILLSHADE_OPACITY, "raster-fade-duration": 0},
             }
         )
-    layers += [contour_line_layer(f) for f in schedule]
+    layers += [contour_line_layer(f, schedule[0]) for f in schedule]
     layers += [contour_label_layer(f) for f in schedule]
     return {
         "version": 8,

@@ -19,7 +19,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from engine.cartography.options import PARAMS_KEY, CartographyOptions
+from engine.cartography.options import PARAMS_KEY, CartographyOptions, check_schedule_fits
 from engine.cartography.units import source_units
 from engine.ccsm.build import BuiltSet, build_contour_set
 from engine.io.dem import DEM_SUFFIXES
@@ -269,6 +269,7 @@ def build_dataset(
     contour_set = read_source(
         spec.path, elevation_field=spec.elevation_field, interval=spec.interval, block=spec.block, executor=executor
     )
+    check_schedule_fits(spec.cartography, contour_set.interval, spec.source_scale)  # before anything is stored
     info = build_and_save(
         store,
         spec.dataset,

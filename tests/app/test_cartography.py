@@ -19,6 +19,7 @@ from helpers import EXTENT, check_tile, decode, grid_to_lonlat, tile_for
 from typer.testing import CliRunner
 
 from app.cli import _register_commands, app
+from engine.store.sqlite import CCSStore
 
 _register_commands()
 
@@ -138,6 +139,27 @@ def test_ccsm_simplify_reports_and_writes_the_dropped_count(tmp_path, synthetic_
     assert bad.exit_code == 2 and "schedule entry 2 '30'" in bad.output.replace("\n", " ")
 
 
+@pytest.mark.parametrize(
+    ("schedule", "message"),
+    [
+        ("50:1e5,100", "schedule entry 1: step 50 must divide the data's interval 20 m"),
+        ("20:40000,100", "schedule entry 1: hide scale 40000 must be larger than the source scale 50000"),
+    ],
+)
+def test_ccsm_simplify_refuses_a_schedule_that_does_not_fit_the_data_before_building(
+    tmp_path, synthetic_path, schedule, message
+):
+    cache = tmp_path / "cache.sqlite"
+    args = ["simplify", str(synthetic_path), "-o", str(tmp_path / "s.geojson"), "--workers", "1"]
+    result = CliRunner().invoke(app, [*args, "--store", str(cache), "--schedule", schedule])
+    assert result.exit_code == 2, result.output
+    assert message in " ".join(result.output.split())
+    assert not (tmp_path / "s.geojson").exists()
+    # Refused before the build: nothing kept in the cache (no dataset, no build under way or failed).
+    store = CCSStore(cache)
+    assert store.dataset_ids() == [] and store.build_statuses() == {}
+
+
 # -- a GeoPackage in feet, served by a real server -------------------------------------------------------
 
 
@@ -246,7 +268,8 @@ def test_upload_options_name_the_elevation_ele_and_set_units_and_schedule(client
     ("query", "where"),
     [
         ("schedule=20:1e5,30", "schedule entry 2 '30'"),
-        ("schedule=50:1e5,100", "step 50 must divide"),
+        ("schedule=50:1e5,100", "schedule entry 1: step 50 must divide the data's interval 20 m"),
+        ("schedule=20:4e4,100:2e5,200", "schedule entry 1: hide scale 40000 must be larger than the source scale"),
         ("units=yards", "units"),
         ("index_every=1", "index_every"),
     ],
@@ -254,8 +277,9 @@ def test_upload_options_name_the_elevation_ele_and_set_units_and_schedule(client
 def test_bad_upload_options_get_a_4xx_naming_them(client, query, where):
     body = json.dumps({"type": "FeatureCollection", "features": synthetic_features()[:4]})
     r = client.post(f"/datasets?id=bad&{query}", content=body, headers={"content-type": "application/geo+json"})
-    if r.status_code == 202:  # a schedule that fits no level is found when the dataset is read
-        wait_ready(client, "bad")
-        r = client.get("/tiles/bad/tilejson.json")
-        client.delete("/datasets/bad")
     assert 400 <= r.status_code < 500 and where in r.text, (r.status_code, r.text)
+    if "schedule" in query:  # a schedule that does not fit the data: refused at once, with a JSON reason
+        assert r.status_code == 400 and where in r.json()["detail"], r.text
+    # Nothing was kept: no dataset, no upload file.
+    assert client.get("/datasets/bad").status_code == 404
+    assert list(Path(client.app.state.service.upload_dir).glob("*.geojson")) == []

@@ -4,16 +4,16 @@
    hillshade: rendered features of the style's layers, and pixels with and without those layers.
 2. OpenLayers with ol-mapbox-style (web/clients/openlayers.html, both from web/node_modules) draws the same
    style: contour-coloured pixels, and more dark pixels with the label layers than without them.
-3. No pop while wheel-zooming on the project's page, three zoom levels out and back in. Method: at every
-   rendered frame the page records the contours and labels on screen (queryRenderedFeatures on the visible
-   line layers and the label layers, by feature id) with the zoom. Each one's opacity at that zoom follows from
-   its own `fade_zoom` and `hide_zoom` (the style's ramp: exponential base 2 from 0 at hide_zoom to 1 at
-   fade_zoom), times `morph_fade` on lines (CCSM's own vanishing of small contours narrows them) and on labels
-   their fade in above their own first zoom (`min_zoom`, as the style draws it). Between consecutive frames,
-   a line or label in
-   the middle of the view (the middle 40 % box, whose ground the other frame shows as long as a frame zooms by
-   less than a level, so nothing counts for entering at the view's edge) that the other frame does not show
-   anywhere must be drawn at most at FADE_EPS opacity: everything arrives and leaves by fading.
+3. No pop while wheel-zooming on the project's page, three zoom levels out and back in, judged by what
+   MapLibre draws. At every rendered frame the page records each contour and label on screen
+   (queryRenderedFeatures on both morph buffers' line layers and the label layers, by feature id) with its drawn
+   strength: the opacity its layer has in that frame, evaluated by MapLibre's own paint state (the style's
+   expression at the frame's zoom with the feature's properties), times, for lines, the width relative to the
+   width at `morph_fade` 1 (CCSM's own vanishing of small contours narrows them). Nothing here restates the
+   style: a style whose fade is a step, or labels without their fade in, are drawn at full strength at once.
+   Between consecutive frames, no line or label in the middle of the view (the middle 40 % box, whose ground
+   the other frame shows as long as a frame zooms by less than a level, so nothing counts for entering at the
+   view's edge) may change its strength by more than POP_JUMP: everything arrives and leaves by fading.
 """
 
 from __future__ import annotations
@@ -22,14 +22,12 @@ import httpx
 import numpy as np
 from PIL import Image
 
-from engine.cartography.style import LABEL_FADE_IN_ZOOMS
-
-#: Opacity at or below which a line or label may appear or go between two frames (it is fading). The style's
-#: ramps span a zoom level or more, so they pass at a few hundredths; the tightest case is CCSM's own
-#: vanishing of small contours (``morph_fade`` over half a level, drawn at the plugin's step): on this
-#: loaded test machine, with every frame queried, the plugin skips steps, and the largest such jump seen was
-#: 0.29 (a contour growing in from nothing to 0.29 of its width in one frame).
-FADE_EPS = 0.3
+#: The most a line's or label's drawn strength (opacity times relative width, as MapLibre evaluates them) may
+#: change between two consecutive frames. A frame zooms by 0.1 or less (one wheel step is 40 / 450 of a level);
+#: the steepest fades are a label's fade in (LABEL_FADE_IN_ZOOMS = 0.5: 0.2 per 0.1 of a zoom) and CCSM's own
+#: vanishing of small contours (``morph_fade`` over half a level, drawn at the plugin's step; on this loaded
+#: machine the plugin skips steps, and the largest jump seen was 0.29). A pop (no fade) is a jump of 1.
+POP_JUMP = 0.5
 #: The middle box of the view whose lines and labels are checked, as fractions of its width and height.
 MIDDLE_LO, MIDDLE_HI = 0.3, 0.7
 
@@ -138,55 +136,85 @@ def test_openlayers_draws_contours_and_labels_from_the_same_style(app):
     assert app.watch.outside_requests == []
 
 
-RECORD_JS = """([labelIds, box, LABEL_FADE_IN]) => {
+RECORD_JS = """([labelIds, box]) => {
     const l = window.ccsm.layers.main, m = l.map;
     const frames = [];
     window.__frames = frames;
-    const key = (f) => `${f.layer.type === 'symbol' ? 'label' : 'line'}:${f.id}`;
+    // How strongly MapLibre draws a rendered feature in this frame: its layer's opacity (and for lines the width
+    // relative to the width at morph_fade 1), each evaluated by MapLibre's own paint state for this frame, i.e.
+    // the style's expressions at the frame's zoom with the feature's properties. No copy of the style here.
+    const strength = (f) => {
+        const layer = m.getLayer(f.layer.id);
+        const feature = {type: f.type === 'Point' ? 1 : 2, id: f.id, properties: f.properties};
+        const value = (name, feat) => {
+            const v = layer.paint.get(name);
+            return typeof v?.evaluate === 'function' ? v.evaluate(feat, {}) : v;
+        };
+        if (layer.type === 'symbol') return value('text-opacity', feature);
+        const full = value('line-width', {...feature, properties: {...f.properties, morph_fade: 1}});
+        return value('line-opacity', feature) * (full > 0 ? Math.min(1, value('line-width', feature) / full) : 0);
+    };
+    // Both morph buffers and the label layers: a buffer being loaded is at opacity 0, so the strongest copy of
+    // a line is the one on screen. A contour's several labels share its id: labels are told apart by place.
+    const inBox = (p) => p.x >= box[0][0] && p.x <= box[1][0] && p.y >= box[0][1] && p.y <= box[1][1];
     m.on('render', () => {
-        const layers = [...l.visibleLayerIds, ...labelIds.filter((id) => m.getLayer(id))];
-        const all = {};
-        const zoom = m.getZoom();
+        const lineIds = (l._plugin?.buffers ?? []).flatMap((b) => b.layerIds);
+        const layers = [...lineIds, ...labelIds].filter((id) => m.getLayer(id));
+        const lines = {}, labels = [];
         for (const f of m.queryRenderedFeatures({layers})) {
-            const p = f.properties;
-            // A label also fades in over LABEL_FADE_IN zooms above its own first zoom (min_zoom).
-            const own = f.layer.type === 'symbol'
-                ? Math.max(0, Math.min(1, (zoom - (p.min_zoom ?? -1)) / LABEL_FADE_IN)) : (p.morph_fade ?? 1);
-            all[key(f)] = [p.fade_zoom, p.hide_zoom, own];
+            if (f.layer.type === 'symbol') {
+                const [lng, lat] = f.geometry.coordinates;
+                labels.push([f.id, lng, lat, strength(f), inBox(m.project([lng, lat]))]);
+            } else {
+                lines[f.id] = Math.max(lines[f.id] ?? 0, strength(f));
+            }
         }
-        const middle = [...new Set(m.queryRenderedFeatures(box, {layers}).map(key))];
-        frames.push({zoom, all, middle});
+        const middle = [...new Set(m.queryRenderedFeatures(box, {layers: lineIds.filter((id) => m.getLayer(id))})
+            .map((f) => String(f.id)))];  // strings, as the keys of `lines` come back from JSON
+        frames.push({zoom: m.getZoom(), lines, middle, labels});
     });
 }"""
 
+#: Two labels of the same contour in consecutive frames are the same label when their anchors are this close
+#: (degrees; anchors are fixed, but each zoom's tiles round them to their own grid; a contour's labels are
+#: hundreds of pixels apart).
+SAME_ANCHOR_DEG = 1e-3
 
-def opacity(seen: list[float], zoom: float) -> float:
-    """How strongly a feature is drawn at a zoom: the style's ramp (docs/clients.md) times its own part: a line's
-    ``morph_fade`` (a contour CCSM lets vanish at its scale narrows to nothing over half a level), a label's fade
-    in above its own first zoom."""
-    fade, hide, morph_fade = seen
-    if hide is None or hide < 0 or zoom >= fade:
-        return float(morph_fade)
-    if zoom <= hide:
-        return 0.0
-    return morph_fade * (2 ** (zoom - hide) - 1) / (2 ** (fade - hide) - 1)
+
+def label_strength(label: list, others: list[list]) -> float:
+    """The strength of ``label`` (id, lng, lat, strength, in middle) in another frame's labels (0: not there)."""
+    same = [
+        o[3] for o in others if o[0] == label[0] and max(abs(o[1] - label[1]), abs(o[2] - label[2])) < SAME_ANCHOR_DEG
+    ]
+    return max(same, default=0.0)
 
 
 def pops(frames: list[dict]) -> list[str]:
-    """Lines and labels in the middle box of one frame that the other frame does not show anywhere, while
-    drawn above FADE_EPS: appeared (new in the later frame) or went (gone from it)."""
+    """Lines and labels in the middle box of one frame whose drawn strength differs from the other frame's by more
+    than POP_JUMP: came in (absent or faint before) or went (absent or faint after) in one frame."""
     out = []
     for a, b in zip(frames, frames[1:], strict=False):
         for k in b["middle"]:
-            if k not in a["all"] and opacity(b["all"][k], b["zoom"]) > FADE_EPS:
-                out.append(f"{k} appeared at zoom {b['zoom']:.3f}, opacity {opacity(b['all'][k], b['zoom']):.2f}")
+            if b["lines"][k] - a["lines"].get(k, 0.0) > POP_JUMP:
+                out.append(
+                    f"line {k} came in at zoom {b['zoom']:.3f}: {a['lines'].get(k, 0.0):.2f} -> {b['lines'][k]:.2f}"
+                )
         for k in a["middle"]:
-            if k not in b["all"] and opacity(a["all"][k], a["zoom"]) > FADE_EPS:
-                out.append(f"{k} went at zoom {b['zoom']:.3f}, from opacity {opacity(a['all'][k], a['zoom']):.2f}")
+            if a["lines"][k] - b["lines"].get(k, 0.0) > POP_JUMP:
+                out.append(
+                    f"line {k} went at zoom {b['zoom']:.3f}: {a['lines'][k]:.2f} -> {b['lines'].get(k, 0.0):.2f}"
+                )
+        for label in (x for x in b["labels"] if x[4]):
+            if label[3] - (before := label_strength(label, a["labels"])) > POP_JUMP:
+                out.append(f"label {label[0]} came in at zoom {b['zoom']:.3f}: {before:.2f} -> {label[3]:.2f}")
+        for label in (x for x in a["labels"] if x[4]):
+            if label[3] - (after := label_strength(label, b["labels"])) > POP_JUMP:
+                out.append(f"label {label[0]} went at zoom {b['zoom']:.3f}: {label[3]:.2f} -> {after:.2f}")
     return out
 
 
-def test_wheel_zoom_across_three_levels_shows_nothing_new_except_by_fading(app):
+def record_wheel_zoom(app) -> list[dict]:
+    """Wheel-zoom the project's page three levels out and back in over the sample, recording every frame."""
     app.open()
     state = app.page.evaluate("() => window.ccsm.cartography")
     assert state["labelLayerIds"] and app.page.evaluate("() => window.ccsm.layers.main.state().plugin")
@@ -196,7 +224,7 @@ def test_wheel_zoom_across_three_levels_shows_nothing_new_except_by_fading(app):
     canvas = app.page.locator("#maps canvas").first.bounding_box()
     w, h = canvas["width"], canvas["height"]
     middle = [[w * MIDDLE_LO, h * MIDDLE_LO], [w * MIDDLE_HI, h * MIDDLE_HI]]
-    app.page.evaluate(RECORD_JS, [state["labelLayerIds"], middle, LABEL_FADE_IN_ZOOMS])
+    app.page.evaluate(RECORD_JS, [state["labelLayerIds"], middle])
     app.page.mouse.move(canvas["x"] + w / 2, canvas["y"] + h / 2)
     for direction, until in ((1, 9.6), (-1, 12.5)):
         for _ in range(200):
@@ -208,13 +236,21 @@ def test_wheel_zoom_across_three_levels_shows_nothing_new_except_by_fading(app):
             app.page.mouse.wheel(0, 40 * direction)
             app.page.wait_for_timeout(250)
         app.wait_settled(90)
-    frames = app.page.evaluate("() => window.__frames")
+    return app.page.evaluate("() => window.__frames")
+
+
+def test_wheel_zoom_across_three_levels_shows_nothing_new_except_by_fading(app):
+    frames = record_wheel_zoom(app)
     zooms = [f["zoom"] for f in frames]
     assert min(zooms) <= 9.7 and max(zooms) >= 12.4 and len(frames) > 20, (min(zooms), max(zooms), len(frames))
     # The middle box of one frame is on screen in the next as long as a frame zooms by less than log2(1 / 0.4).
     assert max(abs(a - b) for a, b in zip(zooms, zooms[1:], strict=False)) < 1.0
-    # The recording saw fading: features at partial opacity on the way.
-    partial = [o for f in frames for fh in f["all"].values() if 0 < (o := opacity(fh, f["zoom"])) < 1]
-    assert len(partial) > 50, len(partial)
+    # The recording saw fading: lines and labels drawn at partial strength on the way.
+    partial = {
+        "line": sum(0.02 < v < 0.98 for f in frames for v in f["lines"].values()),
+        "label": sum(0.02 < x[3] < 0.98 for f in frames for x in f["labels"]),
+    }
+    assert partial["line"] > 50 and partial["label"] > 5, partial
     problems = pops(frames)
-    assert not problems, f"{len(problems)} pops in {len(frames)} frames, first: {problems[:8]}"
+    kinds = {kind: sum(p.startswith(kind) for p in problems) for kind in ("line", "label")}
+    assert not problems, f"{len(problems)} pops in {len(frames)} frames ({kinds}), first: {problems[:8]}"

@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from engine.cartography.options import CartographyOptions, check_schedule_fits
 from engine.cartography.schedule import NEVER, make_schedule, parse_schedule
 from engine.errors import InvalidParameter
 from engine.tiles.scale import scale_for_zoom
@@ -128,3 +129,17 @@ def test_zooms_are_at_the_given_latitude():
     # cos 60° = 1/2: the same scale is one zoom level further out at 60°.
     assert a.ranks[0].hide_zoom - b.ranks[0].hide_zoom == pytest.approx(1.0, abs=2e-4)
     assert not math.isnan(a.ranks[0].fade_zoom)
+
+
+def test_an_override_must_keep_every_level_fully_drawn_at_the_source_scale():
+    with pytest.raises(InvalidParameter, match="entry 1: hide scale 40000 must be larger than the source scale 50000"):
+        make_schedule(20.0, start_scale=50_000, latitude=0, override="20:40000,100")
+    assert make_schedule(20.0, start_scale=50_000, latitude=0, override="20:60000,100").ranks[0].fade_scale == 50_000
+
+
+def test_check_schedule_fits_names_the_entry_and_passes_options_without_an_override():
+    check_schedule_fits(None, 20.0, 50_000)
+    check_schedule_fits(CartographyOptions(), 20.0, 50_000)
+    check_schedule_fits(CartographyOptions(schedule="10:100000,100"), 20.0, 50_000)  # 10 divides 20
+    with pytest.raises(InvalidParameter, match="schedule entry 1: step 30 must divide the data's interval 20 ft"):
+        check_schedule_fits(CartographyOptions(units="ft", schedule="30:100000,300"), 20.0, 50_000)

@@ -74,11 +74,22 @@ def test_each_rank_fades_between_its_own_zooms_with_base_2():
     assert lines["contours-rank-2"]["paint"]["line-opacity"] == 1  # the top rank never hides
 
 
-def test_index_contours_are_heavier():
-    paint = layers_by_id(build_style(source()))["contours-rank-0"]["paint"]
-    case, test, index_width, other_width = paint["line-width"]
-    assert case == "case" and test == ["==", ["to-number", ["get", "level"]], 1]
-    assert index_width > 1.5 * other_width
+@pytest.mark.parametrize("rank", [0, 1, 2])
+def test_index_contours_are_heavier_and_thin_as_the_base_interval_fades_out(rank):
+    width = layers_by_id(build_style(source()))[f"contours-rank-{rank}"]["paint"]["line-width"]
+    # Every rank's lines follow rank 0's fade range (10.9 to 12.2 in source()): index lines are heavy while the
+    # intermediate lines are drawn, lighter (still heavier than an intermediate line) once they are gone.
+    interpolate, how, zoom, z_alone, alone, z_heavy, heavy = width
+    assert (interpolate, how, zoom, z_alone, z_heavy) == ("interpolate", ["exponential", 2], ["zoom"], 10.9, 12.2)
+    for case in (alone, heavy):
+        assert case[:2] == ["case", ["==", ["to-number", ["get", "level"]], 1]]
+    assert heavy[2] > 2 * heavy[3] and heavy[3] < alone[2] < heavy[2] and alone[3] == heavy[3]
+
+
+def test_a_schedule_of_one_rank_has_fixed_widths():
+    one = StyleSource("d", "d", BASE + "/t.json", BASE + "/g", (0, 0, 1, 1), [RankFade(0, 3.0, None)])
+    width = layers_by_id(build_style(one))["contours-rank-0"]["paint"]["line-width"]
+    assert width[0] == "case" and width[2] > 2 * width[3]
 
 
 def test_labels_read_label_and_angle_on_the_map_plane_with_a_halo():

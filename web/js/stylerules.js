@@ -31,9 +31,21 @@ export function contourLineLayers(style) {
   return lines.map((l) => {
     const rest = {...l};
     delete rest.source;
-    const width = l.paint?.['line-width'] ?? 1;
-    return {...rest, paint: {...l.paint, 'line-width': ['*', width, ['coalesce', ['get', 'morph_fade'], 1]]}};
+    return {...rest, paint: {...l.paint, 'line-width': grownIn(l.paint?.['line-width'] ?? 1)}};
   });
+}
+
+/**
+ * A width times `morph_fade`. A zoom ramp (`interpolate` or `step` on `["zoom"]`) must stay the top of the
+ * expression in MapLibre, so there each stop's output is multiplied instead.
+ */
+function grownIn(width) {
+  const fade = (w) => ['*', w, ['coalesce', ['get', 'morph_fade'], 1]];
+  const isZoomRamp = Array.isArray(width) && width[0] === 'interpolate' && JSON.stringify(width[2]) === '["zoom"]';
+  if (isZoomRamp) return [...width.slice(0, 3), ...width.slice(3).map((v, i) => (i % 2 ? fade(v) : v))];
+  const isZoomStep = Array.isArray(width) && width[0] === 'step' && JSON.stringify(width[1]) === '["zoom"]';
+  if (isZoomStep) return [...width.slice(0, 2), ...width.slice(2).map((v, i) => (i % 2 ? v : fade(v)))];
+  return fade(width);
 }
 
 /** The style's label layers, reading from `sourceId`. */

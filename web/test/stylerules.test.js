@@ -46,6 +46,17 @@ test('contour lines lose their source, keep filter and fade, and grow in with mo
   assert.equal(contourSourceId(STYLE), 'ccsm-contours');
 });
 
+test('a zoom-ramped width keeps the ramp on top and grows in at every stop', () => {
+  const ramp = ['interpolate', ['exponential', 2], ['zoom'], 10, ['case', ['==', ['get', 'level'], 1], 0.9, 0.7], 12, 1.5];
+  const layers = [{...STYLE.layers[2], paint: {...STYLE.layers[2].paint, 'line-width': ramp}}];
+  const [line] = contourLineLayers({...STYLE, layers});
+  const grown = (w) => ['*', w, ['coalesce', ['get', 'morph_fade'], 1]];
+  assert.deepEqual(line.paint['line-width'], [...ramp.slice(0, 4), grown(ramp[4]), 12, grown(1.5)]);
+  const step = ['step', ['zoom'], 1, 10, 2];
+  const [stepped] = contourLineLayers({...STYLE, layers: [{...layers[0], paint: {'line-width': step}}]});
+  assert.deepEqual(stepped.paint['line-width'], ['step', ['zoom'], grown(1), 10, grown(2)]);
+});
+
 test('labels read from the given source', () => {
   const [label] = labelLayers(STYLE, 'page-labels');
   assert.equal(label.source, 'page-labels');

@@ -1,0 +1,134 @@
+"""The cartography rules on terrain the project never saw (issue 11): no two labels overlap at any zoom they are
+shown together, and the map stays legible from the source scale to the target scale.
+
+Each terrain is a seeded fractal DEM (tests/synthetic_rasters.py) written as a GeoTIFF, built into a store as the
+service builds a source, and served by the renderer: its labels are the ones the tiles carry, its lines the
+ones ``/simplify`` returns at a scale (the levels the schedule has faded out left out).
+
+Label boxes are measured here on their own terms, not with the placement's boxes: each label's text is a
+rectangle of ``len(text)`` characters of LabelStyle's size, rotated by its ``angle`` about its anchor (a shapely
+polygon in screen pixels); two labels are shown together from the larger of their first zooms on, and since
+anchors hold still their distance on screen only grows with the zoom, so that zoom is where they come closest.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import shapely
+from shapely import affinity
+from synthetic_rasters import fractal_heights, write_geotiff
+
+from engine.cartography.labels import LabelStyle, metres_per_px
+from engine.cartography.style import INDEX_LINE_WIDTH_PX, LINE_WIDTH_PX, RankFade, rank_opacity_at
+from engine.serve.datasets import SourceSpec, build_dataset
+from engine.serve.renderer import Renderer
+from engine.serve.simplify import simplify
+from engine.store.sqlite import CCSStore
+from engine.tiles.scale import zoom_for_scale
+
+pytestmark = pytest.mark.slow
+
+SOURCE_SCALE, TARGET_SCALE = 50_000.0, 500_000.0
+#: (seed, spectral exponent (larger is smoother), CRS, west, north, cell size in CRS units): hills at a 90 m
+#: DEM's resolution, 11.5 km across, so the data still spans some 80 px at the target scale.
+TERRAINS = {
+    "utm33n-hills": (11, 2.6, "EPSG:32633", 500_000.0, 5_200_000.0, 90.0),
+}
+#: Legible: the lines cover at least this share of the data's area at every scale (a map, not blank paper) ...
+MIN_INK = 0.01
+#: ... and at most this share (counted as length times width, overlaps twice: an upper bound; beyond half the
+#: area, lines would no longer read as lines).
+MAX_INK = 0.5
+
+
+@pytest.fixture(scope="module", params=sorted(TERRAINS))
+def served(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> tuple[Renderer, str]:
+    seed, beta, crs, west, north, cell = TERRAINS[request.param]
+    folder = tmp_path_factory.mktemp(request.param)
+    dem = write_geotiff(
+        folder / "dem.tif",
+        fractal_heights(seed, beta).astype("float32"),
+        west=west,
+        north=north,
+        cell=cell,
+        crs=crs,
+    )
+    store = CCSStore(folder / "store.sqlite")
+    spec = SourceSpec(
+        dem, "terrain", request.param, interval=20.0, source_scale=SOURCE_SCALE, target_scale=TARGET_SCALE
+    )
+    build_dataset(store, spec, workers=1)
+    return Renderer(store), "terrain"
+
+
+def text_box(xy_m: np.ndarray, angle: float, text: str, zoom: float, style: LabelStyle) -> shapely.Polygon:
+    """A label's text rectangle on screen at ``zoom`` (pixels, y up), rotated by its ``text-rotate``."""
+    mpp = float(metres_per_px(zoom))
+    cx, cy = xy_m[0] / mpp, xy_m[1] / mpp
+    half_w, half_h = len(text) * style.char_px / 2, style.height_px / 2
+    box = shapely.box(cx - half_w, cy - half_h, cx + half_w, cy + half_h)
+    # text-rotate is clockwise on screen (y down); here y points up, so clockwise is a negative angle.
+    return affinity.rotate(box, -float(angle), origin=(cx, cy))
+
+
+def test_no_two_labels_overlap_at_any_zoom_they_are_shown_together(served):
+    renderer, dataset = served
+    labels = renderer.labels(dataset)
+    assert len(labels) >= 5, f"only {len(labels)} labels on a whole terrain"
+    style = LabelStyle()
+    # Pairs close enough for their boxes to meet at the zoom both are first shown: anchors nearer than the two
+    # boxes' half diagonals (in pixels there). Only those are intersected exactly.
+    zoom = np.maximum.outer(labels.min_zoom, labels.min_zoom)
+    apart_px = np.hypot(*(labels.xy[:, None, :] - labels.xy[None, :, :]).transpose(2, 0, 1)) / metres_per_px(zoom)
+    half_diag = np.array([math.hypot(len(t) * style.char_px, style.height_px) / 2 for t in labels.text])
+    near = np.argwhere(np.triu(apart_px < half_diag[:, None] + half_diag[None, :], k=1))
+    overlaps = []
+    for i, j in near.tolist():
+        a, b = (text_box(labels.xy[k], labels.angle[k], labels.text[k], zoom[i, j], style) for k in (i, j))
+        if a.intersection(b).area > 0.5:  # more than half a pixel of text on text
+            overlaps.append((labels.text[i], labels.text[j], round(float(zoom[i, j]), 2)))
+    assert overlaps == [], f"{len(overlaps)} overlapping pairs of {len(labels)} labels, first: {overlaps[:5]}"
+
+
+def test_labels_carry_their_elevation_with_the_unit_and_sit_on_index_contours(served):
+    renderer, dataset = served
+    labels = renderer.labels(dataset)
+    index_step = 5 * 20.0
+    assert all(e % index_step == 0 for e in labels.elevation.tolist())
+    assert all(t == f"{e:g} m" for t, e in zip(labels.text, labels.elevation.tolist(), strict=True))
+
+
+def ink_share(renderer: Renderer, dataset: str, scale: float, *, all_levels: bool = False) -> float:
+    """Share of the data's area covered by lines at a scale: each drawn contour's length on screen times its
+    width (index lines the heavier width, an upper bound) times its rank's opacity there, over the area.
+    ``all_levels``: every level, at full opacity (the map without the interval schedule)."""
+    carto = renderer.cartography(dataset)
+    zoom = float(zoom_for_scale(scale, carto.latitude))
+    mpp = float(metres_per_px(zoom))
+    fades = {
+        k.rank: RankFade(k.rank, k.fade_zoom, None if k.hide_scale is None else k.hide_zoom)
+        for k in carto.schedule.ranks
+    }
+    info, _ = renderer.info(dataset)
+    minx, miny, maxx, maxy = info.bounds_3857
+    area_px = (maxx - minx) * (maxy - miny) / mpp**2
+    ink = 0.0
+    for c in simplify(renderer, dataset, scale, all_levels=all_levels).contours:
+        length_px = float(np.hypot(*np.diff(c.coords_3857, axis=0).T).sum()) / mpp
+        width = INDEX_LINE_WIDTH_PX if c.level == 1 else LINE_WIDTH_PX
+        ink += length_px * width * (1.0 if all_levels else rank_opacity_at(fades[c.rank], zoom))
+    return ink / area_px
+
+
+def test_the_map_is_legible_from_the_source_scale_to_the_target_scale(served):
+    renderer, dataset = served
+    scales = np.geomspace(SOURCE_SCALE, TARGET_SCALE, 7)
+    shares = [ink_share(renderer, dataset, float(s)) for s in scales]
+    table = ", ".join(f"1:{s:,.0f} {v:.3f}" for s, v in zip(scales, shares, strict=True))
+    assert all(MIN_INK <= v <= MAX_INK for v in shares), table
+    # The rules do the thinning: every level drawn at the target scale would cover at least twice the area.
+    every = ink_share(renderer, dataset, TARGET_SCALE, all_levels=True)
+    assert every > 2 * shares[-1], (every, table)
