@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import signal
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -26,6 +27,10 @@ from engine.tiles.grid import Tile
 from engine.tiles.hillshade import hillshade_tile
 
 log = logging.getLogger("ccsm.render")
+
+#: Niceness a worker adds to its own: when the cores are all busy, the server's event loop (little work, and
+#: ``/healthz`` among it) runs before the workers' long jobs rather than waiting for its turn among them.
+WORKER_NICENESS = 5
 
 
 @dataclass(frozen=True)
@@ -182,6 +187,7 @@ def worker_main(conn: Connection, config: RenderConfig) -> None:
     which stops its workers itself (so Ctrl-C does not print a traceback per worker).
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    os.nice(WORKER_NICENESS)
     worker = Worker(make_renderer(config), ReliefCache())
     renderer_store = config.store_path
     warm(worker.renderer)

@@ -196,3 +196,13 @@ def test_issue_10_upload_checks_are_bounded_and_stopped_at_their_deadline(strict
     assert [p.name for p in uploads.iterdir()] == []
     again = httpx.post(f"{strict.url}/datasets?id=other", content=small_body(), headers=GEOJSON, timeout=120)
     assert again.status_code == 202, again.text
+
+
+def test_issue_10_workers_yield_the_cores_to_the_event_loop(server):
+    """Render workers (and upload checks, builds) run nicer than the server, so when every core is busy the
+    event loop, and /healthz with it, is scheduled first."""
+    own = psutil.Process(server.proc.pid).nice()
+    workers = forked_children(server)
+    assert workers
+    for pid in workers:
+        assert psutil.Process(pid).nice() >= own + 5, (pid, own)
