@@ -194,8 +194,11 @@ def test_issue_10_upload_checks_are_bounded_and_stopped_at_their_deadline(strict
     assert httpx.get(f"{strict.url}/datasets/slow").status_code == 404
     uploads = Path(strict.log_path).parent / "uploads"
     assert [p.name for p in uploads.iterdir()] == []
+    # The slot is free again: the next upload is admitted (202; or, on a heavily loaded machine, its own check
+    # may pass the 3 s deadline too: 503, but not 429).
     again = httpx.post(f"{strict.url}/datasets?id=other", content=small_body(), headers=GEOJSON, timeout=120)
-    assert again.status_code == 202, again.text
+    assert again.status_code in (202, 503), again.text
+    assert again.status_code == 202 or "CCSM_UPLOAD_CHECK_TIMEOUT_S" in again.json()["detail"]
 
 
 def test_issue_10_workers_yield_the_cores_to_the_event_loop(server):
