@@ -16,6 +16,8 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+# Defined beside the upload check, which runs in a process without the web framework.
+from app.upload_check import MalformedUpload as MalformedUpload
 from engine.errors import (
     CCSMError,
     InvalidContour,
@@ -36,16 +38,20 @@ class UploadTooLarge(CCSMError):
     """A request body exceeds CCSM_MAX_UPLOAD_MB."""
 
 
-class MalformedUpload(CCSMError):
-    """An upload is not a GeoJSON FeatureCollection of contour lines."""
-
-
 class DatasetExists(CCSMError):
     """A dataset of that id exists already."""
 
 
 class BuildQueueFull(CCSMError):
     """Every build slot is busy and the queue of builds is full: try again later."""
+
+
+class UploadQueueFull(BuildQueueFull):
+    """Every upload check slot is busy and the queue of checks is full: try again later (429)."""
+
+
+class UploadCheckFailed(CCSMError):
+    """An upload's check passed its deadline or its process died: 503, try again later."""
 
 
 class NotAuthenticated(CCSMError):
@@ -75,6 +81,7 @@ STATUS_CODES: dict[type[Exception], int] = {
     UnsupportedMediaType: 415,
     BuildQueueFull: 429,
     StoreUnwritable: 507,
+    UploadCheckFailed: 503,
     SurfaceFitError: 422,
     StoreNotReady: 503,
     StoreError: 503,
@@ -138,7 +145,7 @@ def _kind(exc: Exception) -> str:
 async def ccsm_error_handler(request: Request, exc: Exception) -> JSONResponse:
     """Domain errors: the status from the table, the message (paths cut) as detail."""
     status = status_for(exc)
-    if status >= 500 and not isinstance(exc, (StoreNotReady, StoreError)):
+    if status >= 500 and not isinstance(exc, (StoreNotReady, StoreError, UploadCheckFailed)):
         log.exception("request %s failed", request_id(request), exc_info=exc)
     elif status == 507:
         log.error("%s %s -> 507 %s", request.method, log_safe(request.url.path), log_safe(exc))

@@ -7,6 +7,7 @@ the background.
 
 from __future__ import annotations
 
+import gc
 import logging
 import uuid
 from collections.abc import AsyncIterator
@@ -26,6 +27,7 @@ from app.lifespan import lifespan
 from app.render_pool import RETRY_AFTER_S, RenderUnavailable, render_lanes_for
 from app.routes import datasets, hillshade, meta, simplify, styles, tiles
 from app.settings import Settings
+from app.uploads import upload_checker_for
 
 log = logging.getLogger("ccsm.app")
 
@@ -70,14 +72,19 @@ class RequestIdMiddleware:
 
 @asynccontextmanager
 async def app_lifespan(app: FastAPI) -> AsyncIterator[None]:
-    """The service's lifespan (store, builds), plus the render workers inside it."""
+    """The service's lifespan (store, builds), plus the render workers and the upload checks inside it."""
     async with lifespan(app):
         lanes = render_lanes_for(app.state.settings)
         app.state.render_lanes = lanes
+        app.state.upload_checker = upload_checker_for(app.state.settings)
         await lanes.start()
+        # Objects made during start-up (modules, routes, settings, the store) live as long as the server: kept
+        # out of the collector's full passes, which would otherwise pause the event loop to walk them.
+        gc.freeze()
         try:
             yield
         finally:
+            app.state.upload_checker.close()
             await lanes.close()
 
 

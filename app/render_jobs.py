@@ -1,4 +1,5 @@
-"""What a render worker process does: open the store read-only, draw tiles and /simplify answers.
+"""What a render worker process does: open the store read-only, draw tiles, hillshade tiles and /simplify
+answers.
 
 This module runs inside the worker processes of :mod:`app.render_pool` (docs/service.md, "Under load").
 It imports no web framework: a job is a plain tuple in, bytes (or an engine error) out.
@@ -8,19 +9,28 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import signal
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
-from engine.errors import CCSMError
+from app.compression import gzip_body, worth_compressing
+from engine.errors import CCSMError, UnknownLayer
+from engine.serve.relief import ReliefCache
 from engine.serve.renderer import Renderer, TileOptions
 from engine.serve.simplify import feature_collection
 from engine.serve.simplify import simplify as simplify_dataset
 from engine.store.sqlite import CCSStore
+from engine.tiles.grid import Tile
+from engine.tiles.hillshade import hillshade_tile
 
 log = logging.getLogger("ccsm.render")
+
+#: Niceness a worker adds to its own: when the cores are all busy, the server's event loop (little work, and
+#: ``/healthz`` among it) runs before the workers' long jobs rather than waiting for its turn among them.
+WORKER_NICENESS = 5
 
 
 @dataclass(frozen=True)
@@ -46,11 +56,24 @@ class TileJob:
     method: str
     t: float | None
     store: Path | None = None  # the store file the request's service reads (replicas switch files)
+    gzip: bool = False  # the client accepts gzip: compress here, off the server's event loop
 
 
 @dataclass(frozen=True)
 class MorphJob:
     """One morph tile."""
+
+    dataset: str
+    z: int
+    x: int
+    y: int
+    store: Path | None = None  # the store file the request's service reads (replicas switch files)
+    gzip: bool = False  # the client accepts gzip: compress here, off the server's event loop
+
+
+@dataclass(frozen=True)
+class HillshadeJob:
+    """One hillshade PNG tile of the DEM a dataset was made from (or given with)."""
 
     dataset: str
     z: int
@@ -69,17 +92,35 @@ class SimplifyJob:
     method: str
     all_levels: bool = False  # keep the levels the interval schedule no longer draws at this scale
     store: Path | None = None  # the store file the request's service reads (replicas switch files)
+    gzip: bool = False  # the client accepts gzip: compress here, off the server's event loop
 
 
 @dataclass(frozen=True)
 class Rendered:
-    """A job's answer: the body (None for an empty tile) and the scale it was drawn at."""
+    """A job's answer: the body (None for an empty tile), the scale it was drawn at, and whether the body is
+    gzipped."""
 
     body: bytes | None
     scale: float
+    gzipped: bool = False
 
 
-Job = TileJob | MorphJob | SimplifyJob
+def compressed(rendered: Rendered) -> Rendered:
+    """The answer with its body gzipped, when it is worth it."""
+    if rendered.body is None or not worth_compressing(rendered.body):
+        return rendered
+    return Rendered(gzip_body(rendered.body), rendered.scale, gzipped=True)
+
+
+Job = TileJob | MorphJob | HillshadeJob | SimplifyJob
+
+
+@dataclass
+class Worker:
+    """What one worker keeps between jobs: its renderer (store, caches) and the shaded reliefs."""
+
+    renderer: Renderer
+    reliefs: ReliefCache
 
 
 def make_renderer(config: RenderConfig, store_path: Path | None = None) -> Renderer:
@@ -93,20 +134,39 @@ def make_renderer(config: RenderConfig, store_path: Path | None = None) -> Rende
     )
 
 
-def run_job(renderer: Renderer, job: Job) -> Rendered:
+def run_job(worker: Worker, job: Job) -> Rendered:
     """Do one job."""
+    renderer = worker.renderer
     if isinstance(job, TileJob):
         tile = renderer.tile(job.dataset, job.z, job.x, job.y, zoom=job.zoom, method=job.method, t=job.t)
         return Rendered(tile.data, tile.scale)
     if isinstance(job, MorphJob):
         tile = renderer.morph_tile(job.dataset, job.z, job.x, job.y)
         return Rendered(tile.data, tile.scale)
+    if isinstance(job, HillshadeJob):
+        return Rendered(draw_hillshade(worker, job), 0.0)
     result = simplify_dataset(
         renderer, job.dataset, job.scale, bbox_lonlat=job.bbox, method=job.method, all_levels=job.all_levels
     )
     doc = feature_collection(result.contours, job.scale, job.method, dropped=result.dropped)
     doc["dataset"] = job.dataset
     return Rendered(json.dumps(doc, separators=(",", ":"), allow_nan=False).encode(), job.scale)
+
+
+def draw_hillshade(worker: Worker, job: HillshadeJob) -> bytes | None:
+    """The PNG of a hillshade tile (None when it misses the DEM); the dataset's relief is shaded once per data
+    version in each worker.
+
+    Raises
+    ------
+    UnknownLayer
+        The dataset has no DEM to shade.
+    """
+    info, _ = worker.renderer.info(job.dataset)
+    relief = worker.reliefs.relief(info)
+    if relief is None:
+        raise UnknownLayer(f"dataset {job.dataset!r} has no DEM to shade")
+    return hillshade_tile(relief, Tile(job.z, job.x, job.y))
 
 
 def warm(renderer: Renderer) -> None:
@@ -127,9 +187,10 @@ def worker_main(conn: Connection, config: RenderConfig) -> None:
     which stops its workers itself (so Ctrl-C does not print a traceback per worker).
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    renderer = make_renderer(config)
+    os.nice(WORKER_NICENESS)
+    worker = Worker(make_renderer(config), ReliefCache())
     renderer_store = config.store_path
-    warm(renderer)
+    warm(worker.renderer)
     conn.send(("ready", None))
     while True:
         try:
@@ -139,10 +200,11 @@ def worker_main(conn: Connection, config: RenderConfig) -> None:
         if job.store is not None and job.store != renderer_store:
             # The service moved to another store file (ccsm build --publish): its caches and data versions
             # belong to the old file, so the worker starts afresh on the new one.
-            renderer.store.close()
-            renderer, renderer_store = make_renderer(config, job.store), job.store
+            worker.renderer.store.close()
+            worker, renderer_store = Worker(make_renderer(config, job.store), ReliefCache()), job.store
         try:
-            answer: tuple[str, Any] = ("ok", run_job(renderer, job))
+            rendered = run_job(worker, job)
+            answer: tuple[str, Any] = ("ok", compressed(rendered) if getattr(job, "gzip", False) else rendered)
         except CCSMError as exc:  # a domain error: the server answers with its status and message
             answer = ("error", exc)
         except Exception as exc:  # a bug: the server answers 500; the traceback is only here, in the log

@@ -80,7 +80,8 @@ class RenderPool:
         # Never fork the server (it runs threads): a fork server, started clean once per server process with
         # the engine imported, forks each worker, so a replacement is ready in well under a second.
         self._ctx = multiprocessing.get_context("forkserver")
-        self._ctx.set_forkserver_preload(["app.render_jobs", "app.render_preload"])
+        # (The upload checks of app/uploads.py are forked from the same server.)
+        self._ctx.set_forkserver_preload(["app.render_jobs", "app.render_preload", "app.upload_check"])
         # Threads that wait on pipes and start processes, so the event loop never blocks on either.
         self._threads = ThreadPoolExecutor(max_workers=2 * size + 2, thread_name_prefix="ccsm-render")
         self._idle: asyncio.Queue[Worker] = asyncio.Queue()

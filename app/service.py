@@ -8,8 +8,6 @@ transaction (:meth:`CCSStore.reserve`), so two requests, or two server processes
 
 from __future__ import annotations
 
-import ctypes
-import json
 import logging
 import os
 import uuid
@@ -20,16 +18,17 @@ from typing import Any
 import numpy as np
 
 from app.builds import BuildRunner
-from app.errors import BuildQueueFull, DatasetExists, MalformedUpload, log_safe
+from app.errors import BuildQueueFull, DatasetExists, log_safe
 from app.settings import Settings
+from app.upload_check import CheckedUpload
+from app.uploads import INCOMING_PREFIX
 from engine.cartography.options import PARAMS_KEY as CARTOGRAPHY_KEY
-from engine.cartography.options import CartographyOptions, check_schedule_fits
+from engine.cartography.options import CartographyOptions
 from engine.errors import CCSMError, StoreError, StoreNotReady, StoreUnwritable, UnknownLayer
 from engine.serve.build_job import BuildJob
 from engine.serve.datasets import RELIEF_DEM_KEY, SourceSpec, build_lock, slugify, source_hash
-from engine.serve.relief import ReliefCache
 from engine.serve.renderer import Renderer, TileOptions
-from engine.store.sqlite import CCSStore, DatasetInfo, pid_alive, unwritable_reason
+from engine.store.sqlite import CCSStore, DatasetInfo, pid_alive
 from engine.tiles.grid import mercator_to_lonlat
 from engine.tiles.scale import zoom_for_scale
 
@@ -40,10 +39,6 @@ log = logging.getLogger("ccsm.service")
 #: Dataset id of the bundled sample.
 SAMPLE_ID = "sample"
 SAMPLE_NAME = "Jacksboro, Tennessee: 20 m contours (USGS DEM, bundled sample)"
-#: Upload files are written under this prefix until their dataset id is reserved.
-INCOMING_PREFIX = ".incoming-"
-#: Bad features listed in the answer to an upload (all of them are in GET /datasets/{id} once built).
-BAD_FEATURES_SHOWN = 20
 
 
 def specs_from_settings(settings: Settings) -> list[SourceSpec]:
@@ -143,28 +138,19 @@ class UploadParams:
             params[CARTOGRAPHY_KEY] = options.as_params()
         return params
 
-    def stored(self, source: Path) -> dict[str, Any]:
+    def stored(self, source_units: str | None) -> dict[str, Any]:
         """The parameters as stored with the dataset: the vertical unit resolved (given, else as the
-        elevation property's name states it, else metres)."""
-        from engine.io.vector import elevation_units
-
+        elevation property's name states it, ``source_units``, else metres)."""
         options = (self.cartography or CartographyOptions()).checked()
-        units = options.units or elevation_units(source, self.elevation_field) or "m"
+        units = options.units or source_units or "m"
         return {**self.as_dict(), CARTOGRAPHY_KEY: replace(options, units=units).as_params()}
 
+    def check(self) -> None:
+        """Refuse bad scales or cartography options (InvalidParameter) before anything is received."""
+        from engine.params import BuildParams
 
-def check_upload_document(body: bytes) -> None:
-    """Refuse a body that is not a GeoJSON FeatureCollection (or Feature) object (MalformedUpload)."""
-    try:
-        doc = json.loads(body)
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise MalformedUpload(f"the body is not valid JSON ({exc})") from None
-    except RecursionError:
-        raise MalformedUpload("the body's JSON is nested too deeply to be GeoJSON") from None
-    if not isinstance(doc, dict) or doc.get("type") not in ("FeatureCollection", "Feature"):
-        raise MalformedUpload("the body must be a GeoJSON FeatureCollection (or Feature) of contour lines")
-    if doc["type"] == "FeatureCollection" and not isinstance(doc.get("features"), list):
-        raise MalformedUpload("a FeatureCollection needs a 'features' array")
+        BuildParams(source_scale=self.source_scale, target_scale=self.target_scale)
+        self.as_dict()
 
 
 class DatasetService:
@@ -179,7 +165,6 @@ class DatasetService:
     def __init__(self, settings: Settings) -> None:
         self.settings = settings
         self.store = open_checked_store(settings.store_path)
-        self.reliefs = ReliefCache()
         self.renderer = Renderer(
             self.store,
             TileOptions(
@@ -257,13 +242,15 @@ class DatasetService:
             log.info("removed the stale upload file %s", path.name)
 
     # -- uploads -----------------------------------------------------------------------------------------
-    def upload(self, body: bytes, *, dataset: str | None, name: str | None, params: UploadParams) -> dict[str, Any]:
-        """Check, store and queue an upload; the JSON answer of POST /datasets.
+    def accept_upload(
+        self, incoming: Path, checked: CheckedUpload, *, dataset: str | None, name: str | None, params: UploadParams
+    ) -> dict[str, Any]:
+        """Reserve the id of an upload that passed its check, keep its file and queue its build; the JSON
+        answer of POST /datasets. The file (streamed there by :func:`app.uploads.receive_upload`) is kept
+        only if the upload is accepted.
 
         Raises
         ------
-        MalformedUpload, SourceError, InvalidParameter
-            The body or the parameters are bad (nothing is kept).
         DatasetExists
             ``dataset`` is taken (stored, building or failed).
         BuildQueueFull
@@ -272,29 +259,11 @@ class DatasetService:
             The disk is full or read-only.
         """
         try:
-            return self._upload(body, dataset=dataset, name=name, params=params)
-        finally:
-            release_freed_memory()
-
-    def _upload(self, body: bytes, *, dataset: str | None, name: str | None, params: UploadParams) -> dict[str, Any]:
-        from engine.io.source import read_source
-        from engine.params import BuildParams
-
-        BuildParams(source_scale=params.source_scale, target_scale=params.target_scale)  # validates the scales
-        params.as_dict()  # bad cartography options are refused before anything is kept
-        check_upload_document(body)
-        if dataset and self._taken(dataset):  # early answer; the reservation below decides
-            raise DatasetExists(f"dataset {dataset!r} exists already; DELETE it first or choose another id")
-        incoming = self._write_incoming(body)
-        try:
-            contour_set = read_source(
-                incoming, elevation_field=params.elevation_field, interval=params.interval
-            )
-            check_schedule_fits(params.cartography, contour_set.interval, params.source_scale)
-            ident = self._reserve(dataset, name, len(contour_set.contours), body, params)
+            if dataset and self._taken(dataset):  # early answer; the reservation below decides
+                raise DatasetExists(f"dataset {dataset!r} exists already; DELETE it first or choose another id")
+            ident = self._reserve(dataset, name, checked.contours, checked.digest)
             path = self.upload_dir / f"{ident}-{uuid.uuid4().hex[:8]}.geojson"
             incoming.rename(path)
-            stored = params.stored(path)
         except BaseException:
             incoming.unlink(missing_ok=True)
             raise
@@ -304,8 +273,8 @@ class DatasetService:
             dataset=ident,
             source_path=str(path),
             name=name or ident,
-            params=stored,
-            digest=source_hash(None, params.as_dict(), data=body),
+            params=params.stored(checked.units),
+            digest=checked.digest,
             workers=1,
         )
         try:
@@ -314,36 +283,17 @@ class DatasetService:
             self.store.delete_any(ident)
             path.unlink(missing_ok=True)
             raise
-        bad = [
-            {"id": b.id, "reason": b.reason} for b in contour_set.bad_features[:BAD_FEATURES_SHOWN]
-        ]
         return {
             "id": ident,
             "name": job.name,
             "state": "building",
-            "contours": len(contour_set.contours),
-            "bad_features": len(contour_set.bad_features),
-            "bad_feature_list": bad,
+            "contours": checked.contours,
+            "bad_features": checked.bad_features,
+            "bad_feature_list": checked.bad_feature_list,
             "href": f"/datasets/{ident}",
         }
 
-    def _write_incoming(self, body: bytes) -> Path:
-        """The body in a file of the upload folder; StoreUnwritable (and no partial file) if it cannot be."""
-        path = self.upload_dir / f"{INCOMING_PREFIX}{os.getpid()}-{uuid.uuid4().hex[:8]}.geojson"
-        try:
-            self.upload_dir.mkdir(parents=True, exist_ok=True)
-            path.write_bytes(body)
-        except OSError as exc:
-            _remove(path)
-            reason = unwritable_reason(exc)
-            if reason is None:
-                raise
-            raise StoreUnwritable(f"the upload cannot be saved: {reason}") from exc
-        return path
-
-    def _reserve(
-        self, dataset: str | None, name: str | None, total: int, body: bytes, params: UploadParams
-    ) -> str:
+    def _reserve(self, dataset: str | None, name: str | None, total: int, digest: str) -> str:
         if dataset:
             if not self.store.reserve(dataset, total):
                 raise DatasetExists(
@@ -351,7 +301,6 @@ class DatasetService:
                 )
             return dataset
         # An id made from the name: uploading a file of the same name again makes name-2, name-3, ...
-        digest = source_hash(None, params.as_dict(), data=body)
         base = (slugify(name) if name else f"upload-{digest[:10]}")[:60] or "upload"
         return self.store.reserve_free(base, total)
 
@@ -466,23 +415,6 @@ class DatasetService:
             elif self.store.data_version(ident) is None:
                 problems.append(f"dataset {ident!r} is being built ({st.done}/{st.total} contours)")
         return problems
-
-
-def release_freed_memory() -> None:
-    """Give the heap freed by a large upload back to the system (glibc keeps it otherwise, and the server's
-    RSS would stay at its peak); a no-op elsewhere."""
-    try:
-        ctypes.CDLL("libc.so.6").malloc_trim(0)
-    except (OSError, AttributeError):
-        pass
-
-
-def _remove(path: Path) -> None:
-    """Remove a file if it is there and can be (a read-only file system cannot hold a partial one anyway)."""
-    try:
-        path.unlink(missing_ok=True)
-    except OSError as exc:
-        log.warning("cannot remove %s: %s", path.name, exc)
 
 
 def _read_only(folder: Path) -> bool:

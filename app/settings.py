@@ -117,6 +117,15 @@ class Settings(BaseSettings):
         default_factory=lambda: ["*"], description="Origins allowed by CORS, comma-separated ('*' = any)."
     )
     max_upload_mb: float = Field(20.0, gt=0, description="Largest POST /datasets body, MB.")
+    upload_checks: int = Field(
+        1, ge=1, le=64, description="Uploads parsed and checked at once (a process each), per server process."
+    )
+    upload_check_queue: int = Field(
+        16, ge=0, le=1000, description="Uploads waiting (on disk) for a check; one more is refused with 429."
+    )
+    upload_check_timeout_s: float = Field(
+        300.0, gt=0, description="Seconds an upload's check may take; then it is stopped and the upload gets 503."
+    )
     admin_token: SecretStr | None = Field(
         None,
         description="Bearer token that writes (POST/DELETE /datasets) need; unset = writes only from "

@@ -76,7 +76,7 @@ def start(store: Path, workers: int, token: str | None) -> LiveServer:
     if token:
         env["CCSM_ADMIN_TOKEN"] = token
     server = LiveServer(env, args=["--workers", str(workers)], log=WORK / "bench-load-server.log")
-    server.wait_healthy(180)
+    server.wait_healthy(600)  # the first start compiles the numba kernels (minutes on a busy machine)
     server.wait_ready("sample")
     return server
 

@@ -1,7 +1,9 @@
 """Memory of the server around large uploads (issue 10): RSS before, at the peak and after four concurrent
 uploads of about 19 MB each (one line of ~760,000 vertices, the issue's hostile upload), builds included.
 
-Builds run in processes of their own (app/builds.py), so the server's own RSS should return near its baseline.
+The server streams each body to disk and parses it in a check process of its own (app/uploads.py), one at a
+time by default; builds run in processes of their own (app/builds.py). So the server's own RSS should stay
+near its baseline throughout, and the child processes' memory is bounded by how many run at once.
 To stay within a few minutes the builds are deleted (their processes ended) once every upload is accepted and
 ``--build-seconds`` have passed; pass a large value to let them finish.
 
@@ -108,7 +110,7 @@ def main() -> None:
         t0 = time.perf_counter()
         with ThreadPoolExecutor(args.uploads) as pool:
             answers = list(pool.map(
-                lambda b: httpx.post(url + "/datasets", content=b, timeout=300,
+                lambda b: httpx.post(url + "/datasets", content=b, timeout=1800,
                                      headers={"content-type": "application/geo+json"}), bodies))
         accepted = time.perf_counter() - t0
         print("answers:", [r.status_code for r in answers], f"in {accepted:.1f} s")
@@ -129,7 +131,8 @@ def main() -> None:
         left = descendants(server.pid)
         print(f"states before delete: {states}")
         print(f"server RSS: baseline {base:.0f} MB, peak {peak['server']:.0f} MB, after {after:.0f} MB")
-        print(f"build processes: peak RSS {peak['builds']:.0f} MB in total, {len(left)} left after delete")
+        print(f"child processes (upload checks, builds, render workers): peak RSS {peak['builds']:.0f} MB in total, "
+              f"{len(left)} left after delete")
     finally:
         server.terminate()
         server.wait(30)

@@ -9,10 +9,11 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
 
 from app.dependencies import get_service, get_settings
-from app.errors import UploadTooLarge
 from app.security import require_json_body, require_writer
 from app.service import DatasetService, UploadParams
 from app.settings import Settings
+from app.upload_check import UploadCheck
+from app.uploads import get_upload_checker, receive_upload
 from engine.cartography.options import CartographyOptions
 
 router = APIRouter(tags=["datasets"])
@@ -33,21 +34,6 @@ def get_dataset(
 ) -> JSONResponse:
     """One dataset: state, extent, counts, scales, build progress and the features left out."""
     return JSONResponse(service.detail(dataset), headers=NO_STORE)
-
-
-async def read_limited(request: Request, limit: int) -> bytes:
-    """The request body, refused with 413 as soon as it exceeds ``limit`` bytes."""
-    declared = request.headers.get("content-length")
-    if declared and declared.isdigit() and int(declared) > limit:
-        raise UploadTooLarge(f"upload of {int(declared)} bytes exceeds the limit of {limit} bytes")
-    chunks = []
-    size = 0
-    async for chunk in request.stream():
-        size += len(chunk)
-        if size > limit:
-            raise UploadTooLarge(f"upload exceeds the limit of {limit} bytes")
-        chunks.append(chunk)
-    return b"".join(chunks)
 
 
 @router.post(
@@ -72,7 +58,11 @@ async def read_limited(request: Request, limit: int) -> bytes:
         409: {"description": "The dataset id exists (ready, building or failed)."},
         413: {"description": "Larger than CCSM_MAX_UPLOAD_MB."},
         415: {"description": "The body is not application/geo+json or application/json."},
-        429: {"description": "Too many builds run and wait (CCSM_MAX_BUILDS, CCSM_BUILD_QUEUE); see Retry-After."},
+        429: {
+            "description": "Too many builds run and wait (CCSM_MAX_BUILDS, CCSM_BUILD_QUEUE), or too many uploads "
+            "are being checked (CCSM_UPLOAD_CHECKS, CCSM_UPLOAD_CHECK_QUEUE); see Retry-After."
+        },
+        503: {"description": "The upload's check passed CCSM_UPLOAD_CHECK_TIMEOUT_S or its process died."},
         507: {"description": "The store or the upload folder cannot be written (full disk, read-only)."},
     },
 )
@@ -121,7 +111,6 @@ async def upload_dataset(
 ) -> JSONResponse:
     """Upload GeoJSON contours (the document itself is the body); answered 202 while the dataset builds in
     a build process of its own."""
-    body = await read_limited(request, settings.max_upload_bytes)
     params = UploadParams(
         elevation_field=elevation_field,
         interval=interval,
@@ -129,7 +118,22 @@ async def upload_dataset(
         target_scale=target_scale or settings.target_scale,
         cartography=CartographyOptions(units, index_every, attribute_names, schedule, attribution),
     )
-    out: dict[str, Any] = await run_in_threadpool(service.upload, body, dataset=id, name=name, params=params)
+    params.check()  # bad scales or options are refused before the body is read
+    # The body goes to a file as it arrives, and is parsed in a process of its own: never on the event loop
+    # (docs/service.md, "Uploads").
+    incoming = await receive_upload(request, service.upload_dir, settings.max_upload_bytes)
+    try:
+        checked = await get_upload_checker(request).check(
+            UploadCheck(
+                incoming, elevation_field, interval, params.as_dict(), params.cartography, params.source_scale
+            )
+        )
+    except BaseException:
+        incoming.unlink(missing_ok=True)
+        raise
+    out: dict[str, Any] = await run_in_threadpool(
+        service.accept_upload, incoming, checked, dataset=id, name=name, params=params
+    )
     return JSONResponse(out, status_code=202, headers={"Location": out["href"], **NO_STORE})
 
 

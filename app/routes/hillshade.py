@@ -5,15 +5,14 @@ from __future__ import annotations
 from typing import Annotated
 
 from fastapi import APIRouter, Depends, Path, Request, Response
-from fastapi.concurrency import run_in_threadpool
 
 from app.dependencies import get_service, get_settings
+from app.render_jobs import HillshadeJob
+from app.render_pool import RenderLanes, get_render_lanes
 from app.responses import etag_matches, make_etag
 from app.service import DatasetService
 from app.settings import Settings
-from engine.errors import UnknownLayer
 from engine.tiles.grid import check_tile
-from engine.tiles.hillshade import hillshade_tile
 
 router = APIRouter(tags=["tiles"])
 
@@ -26,6 +25,7 @@ router = APIRouter(tags=["tiles"])
         204: {"description": "The tile misses the DEM."},
         304: {"description": "Not modified (If-None-Match matched the ETag)."},
         404: {"description": "Unknown dataset, a dataset without a DEM, or z/x/y outside the tile matrix."},
+        503: {"description": "Busy, or not drawn within the deadline (request_timeout_s); see Retry-After."},
     },
     name="get_hillshade_tile",
 )
@@ -37,6 +37,7 @@ async def get_hillshade_tile(
     y: Annotated[int, Path(description="Tile row, 0 at the north edge (XYZ scheme).", ge=0)],
     service: Annotated[DatasetService, Depends(get_service)],
     settings: Annotated[Settings, Depends(get_settings)],
+    lanes: Annotated[RenderLanes, Depends(get_render_lanes)],
 ) -> Response:
     """One hillshade tile of the DEM a dataset was made from (or was given with)."""
     tile = check_tile(z, x, y, settings.min_zoom, settings.max_zoom)
@@ -45,11 +46,9 @@ async def get_hillshade_tile(
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
-    info, _ = service.renderer.info(dataset)
-    relief = await run_in_threadpool(service.reliefs.relief, info)
-    if relief is None:
-        raise UnknownLayer(f"dataset {dataset!r} has no DEM to shade")
-    png = await run_in_threadpool(hillshade_tile, relief, tile)
+    # Shading is CPU work (the relief once per worker, then each tile): it runs in the heavy render lane.
+    job = HillshadeJob(dataset, tile.z, tile.x, tile.y, store=service.settings.store_path)
+    png = (await lanes.heavy.run(job)).body
     if png is None:
         return Response(status_code=204, headers=headers)
     return Response(png, media_type="image/png", headers=headers)

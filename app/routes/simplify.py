@@ -73,10 +73,11 @@ async def simplify(
     ident = dataset or service.default_dataset()
     box = parse_bbox(bbox)
     version = service.require_ready(ident)
-    etag = make_etag("simplify", ident, version, scale, box, method, all_levels, accepts_gzip(request))
+    gz = accepts_gzip(request)
+    etag = make_etag("simplify", ident, version, scale, box, method, all_levels, gz)
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
-    job = SimplifyJob(ident, scale, box, method, all_levels, store=service.settings.store_path)
+    job = SimplifyJob(ident, scale, box, method, all_levels, store=service.settings.store_path, gzip=gz)
     result = await lanes.heavy.run(job)
-    return body_response(request, result.body or b"", "application/geo+json", headers)
+    return body_response(request, result.body or b"", "application/geo+json", headers, gzipped=result.gzipped)

@@ -85,12 +85,12 @@ async def get_tile(
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
-    job = TileJob(dataset, z, x, y, zoom, q.method, t, store=service.settings.store_path)
+    job = TileJob(dataset, z, x, y, zoom, q.method, t, store=service.settings.store_path, gzip=gz)
     result = await lanes.for_tile(q.method).run(job)
     headers["X-Tile-Scale"] = f"{result.scale:.1f}"
     if result.body is None:
         return Response(status_code=204, headers=headers)
-    return body_response(request, result.body, MVT_MEDIA_TYPE, headers)
+    return body_response(request, result.body, MVT_MEDIA_TYPE, headers, gzipped=result.gzipped)
 
 
 @router.get(
@@ -128,10 +128,10 @@ async def get_morph_tile(
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
-    result = await lanes.light.run(MorphJob(dataset, z, x, y, store=service.settings.store_path))
+    result = await lanes.light.run(MorphJob(dataset, z, x, y, store=service.settings.store_path, gzip=gz))
     if result.body is None:
         return Response(status_code=204, headers=headers)
-    return body_response(request, result.body, MVT_MEDIA_TYPE, headers)
+    return body_response(request, result.body, MVT_MEDIA_TYPE, headers, gzipped=result.gzipped)
 
 
 @router.get("/tiles/{dataset}/tilejson.json", name="get_tilejson")

@@ -134,7 +134,7 @@ class LiveServer:
             stderr=subprocess.STDOUT,
         )
 
-    def wait_healthy(self, timeout: float = 60.0) -> None:
+    def wait_healthy(self, timeout: float = 300.0) -> None:  # a first start on a loaded 2-core machine is slow
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:

@@ -169,7 +169,7 @@ def test_issue_10_delete_of_a_building_dataset_stays_deleted(live):
         assert "doomed" not in {d["id"] for d in httpx.get(live.url + "/datasets").json()}
         time.sleep(0.5)
     # The id is free again.
-    again = httpx.post(live.url + "/datasets?id=doomed", content=BODY, headers=GEOJSON)
+    again = httpx.post(live.url + "/datasets?id=doomed", content=BODY, headers=GEOJSON, timeout=120)
     assert again.status_code == 202, again.text
     assert live.wait_ready("doomed")["state"] == "ready"
     assert httpx.delete(live.url + "/datasets/doomed").status_code == 204
