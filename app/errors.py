@@ -54,6 +54,10 @@ class UploadCheckFailed(CCSMError):
     """An upload's check passed its deadline or its process died: 503, try again later."""
 
 
+class ClientGone(CCSMError):
+    """The client hung up before its answer was ready; the work for it was stopped (logged as 499)."""
+
+
 class NotAuthenticated(CCSMError):
     """A write without the bearer token CCSM_ADMIN_TOKEN asks for (or with a wrong one)."""
 
@@ -82,6 +86,7 @@ STATUS_CODES: dict[type[Exception], int] = {
     BuildQueueFull: 429,
     StoreUnwritable: 507,
     UploadCheckFailed: 503,
+    ClientGone: 499,  # nobody reads it: the status a proxy logs for a request its client closed
     SurfaceFitError: 422,
     StoreNotReady: 503,
     StoreError: 503,

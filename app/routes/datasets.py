@@ -13,7 +13,7 @@ from app.security import require_json_body, require_writer
 from app.service import DatasetService, UploadParams
 from app.settings import Settings
 from app.upload_check import UploadCheck
-from app.uploads import get_upload_checker, receive_upload
+from app.uploads import get_upload_checker, receive_upload, unless_client_goes
 from engine.cartography.options import CartographyOptions
 
 router = APIRouter(tags=["datasets"])
@@ -123,11 +123,10 @@ async def upload_dataset(
     # (docs/service.md, "Uploads").
     incoming = await receive_upload(request, service.upload_dir, settings.max_upload_bytes)
     try:
-        checked = await get_upload_checker(request).check(
-            UploadCheck(
-                incoming, elevation_field, interval, params.as_dict(), params.cartography, params.source_scale
-            )
+        job = UploadCheck(
+            incoming, elevation_field, interval, params.as_dict(), params.cartography, params.source_scale
         )
+        checked = await unless_client_goes(request, get_upload_checker(request).check(job))
     except BaseException:
         incoming.unlink(missing_ok=True)
         raise

@@ -201,6 +201,35 @@ def test_issue_10_upload_checks_are_bounded_and_stopped_at_their_deadline(strict
     assert again.status_code == 202 or "CCSM_UPLOAD_CHECK_TIMEOUT_S" in again.json()["detail"]
 
 
+def test_issue_10_a_client_that_goes_away_stops_its_check_and_keeps_nothing(server):
+    """A client that sends its upload and hangs up while it is checked: the check stops, and neither a
+    dataset nor a file is left (a check that ran on would reserve the id and queue a build for nobody)."""
+    import socket
+
+    before = forked_children(server)
+    body = long_line(3 * LARGE_VERTICES, seed=5)  # seconds to check, even on a quiet machine
+    head = (
+        f"POST /datasets?id=hungup HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/geo+json\r\n"
+        f"Content-Length: {len(body)}\r\nConnection: close\r\n\r\n"
+    ).encode()
+    host, port = server.url.removeprefix("http://").split(":")
+    client = socket.create_connection((host, int(port)), timeout=60)
+    client.sendall(head + body)
+    deadline = time.monotonic() + 120
+    while not (checks := forked_children(server) - before):
+        assert time.monotonic() < deadline, "the upload's check never started"
+        time.sleep(0.01)
+    client.close()  # hang up while the upload is checked
+    deadline = time.monotonic() + 300
+    while checks & forked_children(server):
+        assert time.monotonic() < deadline, "the check still runs"
+        time.sleep(0.05)
+    time.sleep(1.0)  # what a finished check would do next (reserve the id, queue the build) is quick
+    assert httpx.get(f"{server.url}/datasets/hungup").status_code == 404
+    uploads = Path(server.log_path).parent / "uploads"
+    assert not [p.name for p in uploads.iterdir() if "hungup" in p.name or p.name.startswith(".incoming-")]
+
+
 def test_issue_10_workers_yield_the_cores_to_the_event_loop(server):
     """Render workers (and upload checks, builds) run nicer than the server, so when every core is busy the
     event loop, and /healthz with it, is scheduled first."""
