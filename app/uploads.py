@@ -18,17 +18,16 @@ import multiprocessing
 import os
 import threading
 import uuid
-from collections.abc import Awaitable
 from concurrent.futures import ThreadPoolExecutor
 from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
 from pathlib import Path
-from typing import IO, Any, TypeVar
+from typing import IO, Any
 
 from fastapi.concurrency import run_in_threadpool
 from starlette.requests import Request
 
-from app.errors import ClientGone, UploadCheckFailed, UploadQueueFull, UploadTooLarge
+from app.errors import UploadCheckFailed, UploadQueueFull, UploadTooLarge
 from app.settings import Settings
 from app.upload_check import CheckedUpload, UploadCheck, checker_main
 from engine.errors import StoreUnwritable
@@ -80,40 +79,6 @@ async def receive_upload(request: Request, folder: Path, limit: int) -> Path:
             raise _unwritable(exc) from exc
         raise
     return path
-
-
-T = TypeVar("T")
-
-
-async def unless_client_goes(request: Request, work: Awaitable[T]) -> T:
-    """Await ``work`` once the request's body has been read; if the client hangs up first, cancel it.
-
-    The server does not cancel a handler whose client went away, so a long check would run on and then
-    reserve an id and queue a build for nobody. After the body, the only message the request can still
-    receive is ``http.disconnect``.
-
-    Raises
-    ------
-    ClientGone
-        The client hung up; ``work`` was cancelled.
-    """
-    task = asyncio.ensure_future(work)
-    watch = asyncio.ensure_future(_disconnected(request))
-    try:
-        await asyncio.wait({task, watch}, return_when=asyncio.FIRST_COMPLETED)
-    finally:
-        watch.cancel()
-        if not task.done():
-            task.cancel()
-            await asyncio.wait({task})  # its clean-up (killing the check) runs before we answer
-    if task.cancelled():
-        raise ClientGone("the client hung up before its upload was checked; the check was stopped")
-    return task.result()
-
-
-async def _disconnected(request: Request) -> None:
-    while (await request.receive())["type"] != "http.disconnect":
-        pass
 
 
 def _open_new(path: Path) -> IO[bytes]:

@@ -7,6 +7,7 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, Path, Request, Response
 
 from app.dependencies import get_service, get_settings
+from app.disconnect import unless_client_goes
 from app.render_jobs import HillshadeJob
 from app.render_pool import RenderLanes, get_render_lanes
 from app.responses import etag_matches, make_etag
@@ -48,7 +49,7 @@ async def get_hillshade_tile(
         return Response(status_code=304, headers=headers)
     # Shading is CPU work (the relief once per worker, then each tile): it runs in the heavy render lane.
     job = HillshadeJob(dataset, tile.z, tile.x, tile.y, store=service.settings.store_path)
-    png = (await lanes.heavy.run(job)).body
+    png = (await unless_client_goes(request, lanes.heavy.run(job))).body
     if png is None:
         return Response(status_code=204, headers=headers)
     return Response(png, media_type="image/png", headers=headers)

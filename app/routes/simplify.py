@@ -7,6 +7,7 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, Query, Request, Response
 
 from app.dependencies import MethodName, get_service, get_settings
+from app.disconnect import unless_client_goes
 from app.render_jobs import SimplifyJob
 from app.render_pool import RenderLanes, get_render_lanes
 from app.responses import accepts_gzip, body_response, etag_matches, make_etag
@@ -79,5 +80,5 @@ async def simplify(
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
     job = SimplifyJob(ident, scale, box, method, all_levels, store=service.settings.store_path, gzip=gz)
-    result = await lanes.heavy.run(job)
+    result = await unless_client_goes(request, lanes.heavy.run(job))
     return body_response(request, result.body or b"", "application/geo+json", headers, gzipped=result.gzipped)

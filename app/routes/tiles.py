@@ -10,6 +10,7 @@ from fastapi import APIRouter, Depends, Path, Request, Response
 from fastapi.responses import JSONResponse
 
 from app.dependencies import TileQuery, get_service, get_settings
+from app.disconnect import unless_client_goes
 from app.public_url import public_base_url
 from app.render_jobs import MorphJob, TileJob
 from app.render_pool import RenderLanes, get_render_lanes
@@ -86,7 +87,7 @@ async def get_tile(
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
     job = TileJob(dataset, z, x, y, zoom, q.method, t, store=service.settings.store_path, gzip=gz)
-    result = await lanes.for_tile(q.method).run(job)
+    result = await unless_client_goes(request, lanes.for_tile(q.method).run(job))
     headers["X-Tile-Scale"] = f"{result.scale:.1f}"
     if result.body is None:
         return Response(status_code=204, headers=headers)
@@ -128,7 +129,8 @@ async def get_morph_tile(
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={settings.cache_max_age}"}
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
-    result = await lanes.light.run(MorphJob(dataset, z, x, y, store=service.settings.store_path, gzip=gz))
+    job = MorphJob(dataset, z, x, y, store=service.settings.store_path, gzip=gz)
+    result = await unless_client_goes(request, lanes.light.run(job))
     if result.body is None:
         return Response(status_code=204, headers=headers)
     return body_response(request, result.body, MVT_MEDIA_TYPE, headers, gzipped=result.gzipped)

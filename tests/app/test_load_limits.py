@@ -117,6 +117,27 @@ def lenient(giant_store, synthetic_path, tmp_path_factory) -> Iterator[LiveServe
         server.stop()
 
 
+@pytest.fixture(scope="module")
+def patient(giant_store, synthetic_path, tmp_path_factory) -> Iterator[LiveServer]:
+    """wm limit lifted and a long deadline, one worker per lane: a heavy request runs as long as wm takes."""
+    store, src = giant_store
+    copy = tmp_path_factory.mktemp("patient") / "ccsm.sqlite"
+    shutil.copy(store, copy)
+    server = start_server(
+        copy,
+        [synthetic_path, src],
+        copy.with_name("server.log"),
+        CCSM_WM_MAX_VERTICES="10000000",
+        CCSM_REQUEST_TIMEOUT_S="120",
+        CCSM_RENDER_WORKERS="1",
+        CCSM_HEAVY_RENDER_WORKERS="1",
+    )
+    try:
+        yield server
+    finally:
+        server.stop()
+
+
 def z2_tile() -> tuple[int, int, int]:
     return tile_for(LON0, LAT0, 2)
 
@@ -209,6 +230,34 @@ def test_issue_10_wm_giant_line_does_not_block_healthz_and_is_cut_at_the_deadlin
     assert r.status_code == 200
     after = render_workers(lenient)
     assert len(after) == 2 and len(after - before) == 1
+
+
+def test_issue_10_a_client_that_hangs_up_stops_its_render(patient):
+    """A client asks a render that takes seconds and hangs up: its worker is killed (the work stops) and
+    replaced, instead of drawing on for nobody until the deadline. A worker that finishes its work is never
+    killed, so only a stop for the hang-up passes."""
+    import socket
+
+    z, x, y = z2_tile()
+    before = render_workers(patient)
+    assert len(before) == 2  # one light, one heavy
+    host, port = patient.url.removeprefix("http://").split(":")
+    client = socket.create_connection((host, int(port)), timeout=30)
+    client.sendall(f"GET /tiles/giant/{z}/{x}/{y}.mvt?method=wm HTTP/1.1\r\nHost: x\r\n\r\n".encode())
+    time.sleep(1.0)  # the heavy worker has the request now (wm on this line takes several seconds)
+    client.close()
+    gone = time.monotonic() + 10
+    while all(alive(p) for p in before):
+        assert time.monotonic() < gone, "no worker was stopped: the render runs on for a client that left"
+        time.sleep(0.05)
+    assert sum(alive(p) for p in before) == 1
+    # A fresh worker takes the stopped one's place, and the lane draws again.
+    deadline = time.monotonic() + 120
+    while len(render_workers(patient) - before) < 1:
+        assert time.monotonic() < deadline, "the stopped worker was not replaced"
+        time.sleep(0.2)
+    r = httpx.get(f"{patient.url}/simplify?dataset=hills&scale=250000", timeout=60)
+    assert r.status_code == 200, r.text
 
 
 GET_ROUTES = [
