@@ -33,6 +33,9 @@ log = logging.getLogger("ccsm.render")
 #: Seconds a new worker may take to start (import, open the store, pack the datasets) before it is
 #: replaced; packing a large dataset takes seconds, a stuck start never ends.
 START_TIMEOUT_S = 300.0
+#: Seconds a job whose client hung up may still take before its worker is killed: a tile ends well within it
+#: (its worker is kept), a long render is stopped.
+CANCEL_GRACE_S = 1.0
 #: Seconds a client is told to wait before trying again after a 503 from the pool.
 RETRY_AFTER_S = 5
 
@@ -89,6 +92,7 @@ class RenderPool:
         self._lock = threading.Lock()
         self._admitted = 0
         self._closed = False
+        self._settling: set[asyncio.Task[None]] = set()  # workers whose request was cancelled (kept referenced)
         self.replaced = 0
 
     # -- lifecycle ---------------------------------------------------------------------------------------
@@ -185,10 +189,12 @@ class RenderPool:
             raise self._too_slow("no render worker became free", "") from None
         loop = asyncio.get_running_loop()
         worker.busy_since = time.monotonic()
+        exchange = loop.run_in_executor(self._threads, _exchange, worker.conn, job, deadline - time.monotonic())
         try:
-            status, value = await loop.run_in_executor(
-                self._threads, _exchange, worker.conn, job, deadline - time.monotonic()
-            )
+            status, value = await asyncio.shield(exchange)
+        except asyncio.CancelledError:  # the client went away (app/disconnect.py): stop the work, cheaply
+            self._settle_soon(worker, exchange)
+            raise
         except _Late:
             self._replace(worker)
             raise self._too_slow("the answer was not ready", "; the work was stopped") from None
@@ -197,14 +203,29 @@ class RenderPool:
             raise RenderUnavailable(
                 f"the render worker stopped while drawing this; try again in {RETRY_AFTER_S} s"
             ) from None
-        except BaseException:  # the request was cancelled: its worker may still be busy with it
-            self._replace(worker)
-            raise
         worker.busy_since = None
         self._idle.put_nowait(worker)
         if status == "ok":
             return value  # type: ignore[no-any-return]
         raise value
+
+    def _settle_soon(self, worker: Worker, exchange: asyncio.Future[tuple[str, Any]]) -> None:
+        """After a cancelled request: a job that ends within CANCEL_GRACE_S gives its worker back (a fresh
+        worker costs more than most tiles, and a client that asks and hangs up must not make the pool
+        respawn), one that runs on is stopped by killing its worker."""
+
+        async def settle() -> None:
+            try:
+                await asyncio.wait_for(exchange, CANCEL_GRACE_S)
+            except BaseException:  # still running, late or dead: stop it
+                self._replace(worker)
+                return
+            worker.busy_since = None
+            self._idle.put_nowait(worker)
+
+        task = asyncio.get_running_loop().create_task(settle())
+        self._settling.add(task)
+        task.add_done_callback(self._settling.discard)
 
     def _replace(self, worker: Worker) -> None:
         """Kill a worker whose job is late or lost and start a fresh one in its place."""

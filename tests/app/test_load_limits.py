@@ -193,9 +193,9 @@ def test_issue_10_wm_giant_line_does_not_block_healthz_and_is_cut_at_the_deadlin
 
     thread = threading.Thread(target=ask_heavy)
     thread.start()
-    time.sleep(0.5)  # the heavy request is in the heavy worker now
     poller = threading.Thread(target=poll_health)
-    poller.start()
+    poller.start()  # /healthz is asked all the time the heavy request runs
+    time.sleep(0.5)  # the heavy request is in the heavy worker now
     # The heavy lane's one worker is taken and there is no queue: another heavy request gets 503 at once.
     t0 = time.monotonic()
     busy = httpx.get(f"{lenient.url}/simplify?dataset=hills&scale=250000", timeout=10)
@@ -208,7 +208,7 @@ def test_issue_10_wm_giant_line_does_not_block_healthz_and_is_cut_at_the_deadlin
     poller.join()
     assert busy.status_code == 503 and "busy" in busy.json()["detail"]
     assert busy.headers["retry-after"] and busy_seconds < HEALTH_BOUND_S
-    assert len(health) >= 3 and max(health) < HEALTH_BOUND_S, health
+    assert len(health) >= 2 and max(health) < HEALTH_BOUND_S, health
     assert light and set(light) == {200}  # the light lane kept drawing ccsm tiles meanwhile
     r = heavy["response"]
     assert isinstance(r, httpx.Response)
