@@ -16,6 +16,7 @@ import shutil
 import threading
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import httpx
@@ -81,61 +82,47 @@ def start_server(store: Path, sources: list[Path], log: Path, **env: str) -> Liv
     return server
 
 
-@pytest.fixture(scope="module")
-def strict(giant_store, synthetic_path, tmp_path_factory) -> Iterator[LiveServer]:
-    """Default limits; the Host header of requests is hostile in some tests."""
+@contextmanager
+def server_on_a_copy(
+    giant_store: tuple[Path, Path], synthetic_path: Path, folder: Path, **env: str
+) -> Iterator[LiveServer]:
+    """A server on its own copy of the giant store, with ``env`` settings; stopped afterwards."""
     store, src = giant_store
-    copy = tmp_path_factory.mktemp("strict") / "ccsm.sqlite"
+    copy = folder / "ccsm.sqlite"
     shutil.copy(store, copy)
-    server = start_server(copy, [synthetic_path, src], copy.with_name("server.log"))
+    server = start_server(copy, [synthetic_path, src], copy.with_name("server.log"), **env)
     try:
         yield server
     finally:
         server.stop()
+
+
+#: A heavy lane of one worker, and wm allowed on the giant line (so a request takes seconds).
+ONE_HEAVY_WORKER = {"CCSM_WM_MAX_VERTICES": "10000000", "CCSM_RENDER_WORKERS": "1", "CCSM_HEAVY_RENDER_WORKERS": "1"}
+
+
+@pytest.fixture(scope="module")
+def strict(giant_store, synthetic_path, tmp_path_factory) -> Iterator[LiveServer]:
+    """Default limits; the Host header of requests is hostile in some tests."""
+    with server_on_a_copy(giant_store, synthetic_path, tmp_path_factory.mktemp("strict")) as server:
+        yield server
 
 
 @pytest.fixture(scope="module")
 def lenient(giant_store, synthetic_path, tmp_path_factory) -> Iterator[LiveServer]:
     """wm limit lifted, a 1 s deadline, one worker per lane and no queue: the heavy request meets the
     deadline, and another heavy request meanwhile finds its lane full."""
-    store, src = giant_store
-    copy = tmp_path_factory.mktemp("lenient") / "ccsm.sqlite"
-    shutil.copy(store, copy)
-    server = start_server(
-        copy,
-        [synthetic_path, src],
-        copy.with_name("server.log"),
-        CCSM_WM_MAX_VERTICES="10000000",
-        CCSM_REQUEST_TIMEOUT_S="1",
-        CCSM_RENDER_WORKERS="1",
-        CCSM_HEAVY_RENDER_WORKERS="1",
-        CCSM_RENDER_QUEUE="0",
-    )
-    try:
+    env = {**ONE_HEAVY_WORKER, "CCSM_REQUEST_TIMEOUT_S": "1", "CCSM_RENDER_QUEUE": "0"}
+    with server_on_a_copy(giant_store, synthetic_path, tmp_path_factory.mktemp("lenient"), **env) as server:
         yield server
-    finally:
-        server.stop()
 
 
 @pytest.fixture(scope="module")
 def patient(giant_store, synthetic_path, tmp_path_factory) -> Iterator[LiveServer]:
     """wm limit lifted and a long deadline, one worker per lane: a heavy request runs as long as wm takes."""
-    store, src = giant_store
-    copy = tmp_path_factory.mktemp("patient") / "ccsm.sqlite"
-    shutil.copy(store, copy)
-    server = start_server(
-        copy,
-        [synthetic_path, src],
-        copy.with_name("server.log"),
-        CCSM_WM_MAX_VERTICES="10000000",
-        CCSM_REQUEST_TIMEOUT_S="120",
-        CCSM_RENDER_WORKERS="1",
-        CCSM_HEAVY_RENDER_WORKERS="1",
-    )
-    try:
+    env = {**ONE_HEAVY_WORKER, "CCSM_REQUEST_TIMEOUT_S": "120"}
+    with server_on_a_copy(giant_store, synthetic_path, tmp_path_factory.mktemp("patient"), **env) as server:
         yield server
-    finally:
-        server.stop()
 
 
 def z2_tile() -> tuple[int, int, int]:
@@ -169,6 +156,14 @@ def alive(pid: int) -> bool:
     except psutil.NoSuchProcess:
         return False
 
+
+def wait_one_stopped(workers: set[int], within_s: float, why: str) -> None:
+    """Wait until exactly one of ``workers`` has ended (killed), at most ``within_s`` seconds."""
+    gone = time.monotonic() + within_s
+    while all(alive(p) for p in workers):
+        assert time.monotonic() < gone, why
+        time.sleep(0.05)
+    assert sum(alive(p) for p in workers) == 1
 
 def test_issue_10_wm_giant_line_does_not_block_healthz_and_is_cut_at_the_deadline(lenient):
     z, x, y = z2_tile()
@@ -216,11 +211,7 @@ def test_issue_10_wm_giant_line_does_not_block_healthz_and_is_cut_at_the_deadlin
     assert "deadline" in r.json()["detail"] and r.headers["retry-after"]
     assert heavy["seconds"] < 8.0  # a 1 s deadline; wm alone takes several seconds on this line
     # The work stopped: the heavy worker is gone (killed, not left running), and a fresh one replaces it.
-    gone = time.monotonic() + 5
-    while all(alive(p) for p in before):
-        assert time.monotonic() < gone, "the worker of the late request still runs"
-        time.sleep(0.1)
-    assert sum(alive(p) for p in before) == 1
+    wait_one_stopped(before, 5, "the worker of the late request still runs")
     deadline = time.monotonic() + 60
     while True:
         r = httpx.get(f"{lenient.url}/simplify?dataset=hills&scale=250000", timeout=10)
@@ -246,11 +237,7 @@ def test_issue_10_a_client_that_hangs_up_stops_its_render(patient):
     client.sendall(f"GET /tiles/giant/{z}/{x}/{y}.mvt?method=wm HTTP/1.1\r\nHost: x\r\n\r\n".encode())
     time.sleep(1.0)  # the heavy worker has the request now (wm on this line takes several seconds)
     client.close()
-    gone = time.monotonic() + 10
-    while all(alive(p) for p in before):
-        assert time.monotonic() < gone, "no worker was stopped: the render runs on for a client that left"
-        time.sleep(0.05)
-    assert sum(alive(p) for p in before) == 1
+    wait_one_stopped(before, 10, "no worker was stopped: the render runs on for a client that left")
     # A fresh worker takes the stopped one's place, and the lane draws again.
     deadline = time.monotonic() + 120
     while len(render_workers(patient) - before) < 1:
