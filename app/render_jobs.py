@@ -28,9 +28,13 @@ from engine.tiles.hillshade import hillshade_tile
 
 log = logging.getLogger("ccsm.render")
 
-#: Niceness a worker adds to its own: when the cores are all busy, the server's event loop (little work, and
-#: ``/healthz`` among it) runs before the workers' long jobs rather than waiting for its turn among them.
-WORKER_NICENESS = 5
+#: Niceness a light-lane worker adds to its own: when the cores are all busy, the server's event loop (little
+#: work, and ``/healthz`` among it) runs before the workers' jobs rather than waiting for its turn among them.
+LIGHT_NICENESS = 5
+#: Niceness of the heavy lane's workers and of upload checks: below the light lane too, so map tiles (ms each)
+#: keep their pace while whole-dataset and per-request simplifications run (a nice-10 process gets about a
+#: third of a nice-5 one's share of a busy core).
+HEAVY_NICENESS = 10
 
 
 @dataclass(frozen=True)
@@ -180,14 +184,14 @@ def warm(renderer: Renderer) -> None:
             log.warning("render worker: could not pack %s ahead of use", dataset, exc_info=True)
 
 
-def worker_main(conn: Connection, config: RenderConfig) -> None:
+def worker_main(conn: Connection, config: RenderConfig, niceness: int = LIGHT_NICENESS) -> None:
     """A worker's loop: warm up, say ``ready``, then answer jobs until the pipe closes.
 
     Each answer is ``("ok", Rendered)`` or ``("error", exception)``. SIGINT is left to the server process,
     which stops its workers itself (so Ctrl-C does not print a traceback per worker).
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    os.nice(WORKER_NICENESS)
+    os.nice(niceness)
     worker = Worker(make_renderer(config), ReliefCache())
     renderer_store = config.store_path
     warm(worker.renderer)

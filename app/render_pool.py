@@ -24,7 +24,7 @@ from typing import Any
 
 from starlette.requests import Request
 
-from app.render_jobs import Job, RenderConfig, Rendered, worker_main
+from app.render_jobs import HEAVY_NICENESS, LIGHT_NICENESS, Job, RenderConfig, Rendered, worker_main
 from app.settings import Settings
 from engine.errors import CCSMError
 
@@ -73,10 +73,15 @@ class RenderPool:
         Requests that may wait for a free worker; one more gets 503 at once.
     timeout_s
         Deadline of a request, seconds from :meth:`run` to its answer.
+    niceness
+        Niceness the workers add to the server's (app.render_jobs: LIGHT_NICENESS, HEAVY_NICENESS).
     """
 
-    def __init__(self, config: RenderConfig, size: int, queue: int, timeout_s: float) -> None:
+    def __init__(
+        self, config: RenderConfig, size: int, queue: int, timeout_s: float, niceness: int = LIGHT_NICENESS
+    ) -> None:
         self.config = config
+        self.niceness = niceness
         self.size = size
         self.queue = queue
         self.timeout_s = timeout_s
@@ -126,7 +131,7 @@ class RenderPool:
     def _start_process(self) -> Worker:
         parent, child = self._ctx.Pipe()
         process = self._ctx.Process(
-            target=worker_main, args=(child, self.config), name="ccsm-render", daemon=True
+            target=worker_main, args=(child, self.config, self.niceness), name="ccsm-render", daemon=True
         )
         process.start()
         child.close()
@@ -304,7 +309,7 @@ def render_lanes_for(settings: Settings) -> RenderLanes:
     queue, timeout = settings.render_queue, settings.request_timeout_s
     return RenderLanes(
         light=RenderPool(config, settings.render_workers, queue, timeout),
-        heavy=RenderPool(config, settings.heavy_render_workers, queue, timeout),
+        heavy=RenderPool(config, settings.heavy_render_workers, queue, timeout, HEAVY_NICENESS),
     )
 
 

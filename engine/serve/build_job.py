@@ -34,8 +34,9 @@ log = logging.getLogger("ccsm.build")
 PROGRESS_EVERY_S = 0.25
 #: Seconds between two checks that the server that started the build is still there.
 PARENT_CHECK_S = 1.0
-#: Niceness a build adds to its own: when the cores are busy, the server's event loop runs first.
-BUILD_NICENESS = 5
+#: Niceness a build adds to its own: when the cores are busy, the server's event loop and its map tiles (render
+#: workers at 5) run first; a build is background work.
+BUILD_NICENESS = 10
 
 
 @dataclass(frozen=True)
