@@ -16,7 +16,8 @@ tile unit. Touching (an orientation of zero) is not a crossing: on the grid, lin
 forced to touch.
 
 Only pairs of pieces (PIECE_SEGMENTS segments of a part) of different contours whose boxes over the whole level
-overlap are compared, and inside them only segments whose boxes over the step overlap.
+overlap are compared; inside them, a pair of segments only if at the start they are no farther apart than their
+points travel in the level, and in a step only if their boxes over the step overlap.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 #: Segments per piece: the box index sees pieces, the compiled pass compares their segments pair by pair.
-PIECE_SEGMENTS = 12
+PIECE_SEGMENTS = 4
 #: Below this share of the largest coefficient the lam^2 term is dropped (the other root is far outside [0, 1]).
 LINEAR_SHARE = 1e-12
 
@@ -100,45 +101,126 @@ def _segments_cross_in_step(a, d, s, t, roots):  # pragma: no cover - compiled
     return False
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _apart(lo, hi, i, j):  # pragma: no cover - compiled
-    """Are boxes i and j (rows of lo, hi) apart?"""
-    return hi[i, 0] < lo[j, 0] or hi[j, 0] < lo[i, 0] or hi[i, 1] < lo[j, 1] or hi[j, 1] < lo[i, 1]
+@njit(cache=True, nogil=True)
+def _point_segment_dist2(px, py, ax, ay, bx, by):  # pragma: no cover - compiled
+    """Squared distance from point p to segment a-b."""
+    ex, ey = bx - ax, by - ay
+    ee = ex * ex + ey * ey
+    u = 0.0 if ee == 0.0 else min(1.0, max(0.0, ((px - ax) * ex + (py - ay) * ey) / ee))
+    dx, dy = ax + u * ex - px, ay + u * ey - py
+    return dx * dx + dy * dy
 
 
 @njit(cache=True, nogil=True)
-def _pieces_cross_in_step(a, d, lo, hi, p0, p1, q0, q1, roots):  # pragma: no cover - compiled
-    """Does a segment of points p0..p1 cross one of points q0..q1 properly in the step? lo, hi: each segment's
-    box over the step (row s for segment (s, s + 1))."""
-    for s in range(p0, p1):
-        for t in range(q0, q1):
-            if not _apart(lo, hi, s, t) and _segments_cross_in_step(a, d, s, t, roots):
-                return True
+def _segments_dist(a, s, t):  # pragma: no cover - compiled
+    """Distance between segments (s, s + 1) and (t, t + 1) of points ``a``; 0 when they meet."""
+    p1x, p1y, p2x, p2y = a[s, 0], a[s, 1], a[s + 1, 0], a[s + 1, 1]
+    q1x, q1y, q2x, q2y = a[t, 0], a[t, 1], a[t + 1, 0], a[t + 1, 1]
+    o1 = _side(p1x, p1y, p2x, p2y, q1x, q1y)
+    o2 = _side(p1x, p1y, p2x, p2y, q2x, q2y)
+    o3 = _side(q1x, q1y, q2x, q2y, p1x, p1y)
+    o4 = _side(q1x, q1y, q2x, q2y, p2x, p2y)
+    if o1 * o2 < 0 and o3 * o4 < 0:
+        return 0.0
+    d = min(
+        _point_segment_dist2(q1x, q1y, p1x, p1y, p2x, p2y),
+        _point_segment_dist2(q2x, q2y, p1x, p1y, p2x, p2y),
+        _point_segment_dist2(p1x, p1y, q1x, q1y, q2x, q2y),
+        _point_segment_dist2(p2x, p2y, q1x, q1y, q2x, q2y),
+    )
+    return np.sqrt(d)
+
+
+@njit(cache=True, nogil=True)
+def _may_meet(pos, lo, hi, reach, s, t):  # pragma: no cover - compiled
+    """Can segments (s, s + 1) and (t, t + 1) meet at all in the level? Their boxes over the level must overlap,
+    and at the start they must be no farther apart than the farthest their points travel from there."""
+    if (
+        max(hi[s, 0], hi[s + 1, 0]) < min(lo[t, 0], lo[t + 1, 0])
+        or max(hi[t, 0], hi[t + 1, 0]) < min(lo[s, 0], lo[s + 1, 0])
+        or max(hi[s, 1], hi[s + 1, 1]) < min(lo[t, 1], lo[t + 1, 1])
+        or max(hi[t, 1], hi[t + 1, 1]) < min(lo[s, 1], lo[s + 1, 1])
+    ):
+        return False
+    # Each point of a segment is a mix of its ends, so it stays within the ends' farthest travel of the segment
+    # at the start; the margin covers rounding.
+    travel = max(reach[s], reach[s + 1]) + max(reach[t], reach[t + 1])
+    return _segments_dist(pos[0], s, t) <= travel * (1.0 + 1e-9) + 1e-9
+
+
+@njit(cache=True, nogil=True)
+def _step_apart(a, b, s, t):  # pragma: no cover - compiled
+    """Are the boxes of segments (s, s + 1) and (t, t + 1) over a step (points a at its start, b at its end) apart?"""
+    for c in range(2):
+        s_lo = min(a[s, c], a[s + 1, c], b[s, c], b[s + 1, c])
+        s_hi = max(a[s, c], a[s + 1, c], b[s, c], b[s + 1, c])
+        t_lo = min(a[t, c], a[t + 1, c], b[t, c], b[t + 1, c])
+        t_hi = max(a[t, c], a[t + 1, c], b[t, c], b[t + 1, c])
+        if s_hi < t_lo or t_hi < s_lo:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def _segments_cross_in_level(pos, steps_d, s, t, roots):  # pragma: no cover - compiled
+    """Do segments (s, s + 1) and (t, t + 1) cross properly at some moment of some step of the level?"""
+    for k in range(pos.shape[0] - 1):
+        if not _step_apart(pos[k], pos[k + 1], s, t) and _segments_cross_in_step(pos[k], steps_d[k], s, t, roots):
+            return True
     return False
 
 
 @njit(cache=True, nogil=True)
 def _pairs_cross(pos, first, last, pp, qq, out):  # pragma: no cover - compiled
-    """out[k]: do pieces pp[k] and qq[k] cross properly at some moment of the level? pos: (steps + 1, N, 2)."""
+    """out[m]: do pieces pp[m] and qq[m] cross properly at some moment of the level? pos: (steps + 1, N, 2)."""
     roots = np.empty(10)
-    n = pos.shape[1]
-    for k in range(pos.shape[0] - 1):
-        a = pos[k]
-        d = pos[k + 1] - a
-        # Box of each segment (s, s + 1) over the step, in row s: its ends at both moments bound its motion.
-        ends_lo = np.minimum(a, pos[k + 1])
-        ends_hi = np.maximum(a, pos[k + 1])
-        lo = np.empty((n, 2))
-        hi = np.empty((n, 2))
-        lo[: n - 1] = np.minimum(ends_lo[:-1], ends_lo[1:])
-        hi[: n - 1] = np.maximum(ends_hi[:-1], ends_hi[1:])
-        lo[n - 1] = ends_lo[n - 1]
-        hi[n - 1] = ends_hi[n - 1]
-        for m in range(len(pp)):
+    steps_d = pos[1:] - pos[:-1]
+    lo = pos[0].copy()
+    hi = pos[0].copy()
+    reach = np.zeros(pos.shape[1])
+    for k in range(1, pos.shape[0]):
+        for v in range(pos.shape[1]):
+            for c in range(2):
+                lo[v, c] = min(lo[v, c], pos[k, v, c])
+                hi[v, c] = max(hi[v, c], pos[k, v, c])
+            dx, dy = pos[k, v, 0] - pos[0, v, 0], pos[k, v, 1] - pos[0, v, 1]
+            reach[v] = max(reach[v], np.sqrt(dx * dx + dy * dy))
+    for m in range(len(pp)):
+        p, q = pp[m], qq[m]
+        for s in range(first[p], last[p]):
+            for t in range(first[q], last[q]):
+                if _may_meet(pos, lo, hi, reach, s, t) and _segments_cross_in_level(pos, steps_d, s, t, roots):
+                    out[m] = True
+                    break
             if out[m]:
-                continue
-            p, q = pp[m], qq[m]
-            out[m] = _pieces_cross_in_step(a, d, lo, hi, first[p], last[p], first[q], last[q], roots)
+                break
+
+
+@njit(cache=True, nogil=True)
+def _positions(start, end, w, point_owner):  # pragma: no cover - compiled
+    """(steps + 1, N, 2) every point at every step: ``start + w (end - start)`` with its contour's ``w``."""
+    pos = np.empty((w.shape[0], len(start), 2))
+    for k in range(w.shape[0]):
+        for v in range(len(start)):
+            wk = w[k, point_owner[v]]
+            for c in range(2):
+                pos[k, v, c] = start[v, c] + wk * (end[v, c] - start[v, c])
+    return pos
+
+
+@njit(cache=True, nogil=True)
+def _piece_boxes(pos, first, last):  # pragma: no cover - compiled
+    """(P, 4) box of each piece's points over every step: min x, min y, max x, max y."""
+    boxes = np.empty((len(first), 4))
+    for i in range(len(first)):
+        boxes[i, 0] = boxes[i, 1] = np.inf
+        boxes[i, 2] = boxes[i, 3] = -np.inf
+        for k in range(pos.shape[0]):
+            for v in range(first[i], last[i] + 1):
+                for c in range(2):
+                    boxes[i, c] = min(boxes[i, c], pos[k, v, c])
+                    boxes[i, 2 + c] = max(boxes[i, 2 + c], pos[k, v, c])
+    return boxes
 
 
 def _pieces(part_len: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
@@ -188,15 +270,13 @@ def morph_crossing_pairs(
     first, last, piece_part = _pieces(np.asarray(part_len, dtype=np.int64))
     if len(first) < 2:
         return set()
-    s = np.asarray(start, dtype=np.float64)
-    e = np.asarray(end, dtype=np.float64)
     point_owner = np.repeat(np.asarray(part_owner, dtype=np.int64), part_len)
-    pos = np.ascontiguousarray(s[None] + w[:, point_owner][..., None] * (e - s)[None])  # (steps + 1, N, 2)
+    pos = _positions(
+        np.asarray(start, dtype=np.float64), np.asarray(end, dtype=np.float64), np.ascontiguousarray(w), point_owner
+    )
     # Each piece's box over the whole level: the motion between steps is straight, so the steps bound it.
-    lo, hi = pos.min(axis=0), pos.max(axis=0)
-    box_lo = np.minimum(np.minimum.reduceat(lo, first), lo[last])
-    box_hi = np.maximum(np.maximum.reduceat(hi, first), hi[last])
-    boxes = shapely.box(box_lo[:, 0], box_lo[:, 1], box_hi[:, 0], box_hi[:, 1])
+    lo_hi = _piece_boxes(pos, first, last)
+    boxes = shapely.box(lo_hi[:, 0], lo_hi[:, 1], lo_hi[:, 2], lo_hi[:, 3])
     p, q = shapely.STRtree(boxes).query(boxes)
     owner = np.asarray(part_owner, dtype=np.int64)[piece_part]
     keep = owner[p] < owner[q]  # different contours, each pair of pieces once
