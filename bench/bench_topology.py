@@ -12,9 +12,10 @@ docs/design.md section 4.8).
 
 With ``--render-times``, every tile of z8-z14 over the source is rendered in process with snap rounding off (plain
 rounding, as before issue 13) and on: per-level tiles at z and z + 0.5, and morph tiles; it prints render time
-p50/p95 of each and how many tiles came out different (snap-rounded tiles, morph tiles with contours held).
+p50/p95/max of each, how many tiles came out different (snap-rounded tiles, morph tiles with contours held) and
+how many contours the morph tiles hold still (docs/morph-tiles.md). ``--morph-only`` times the morph tiles alone.
 
-    python bench/bench_topology.py [SOURCE ...] [--synthetic] [--scales 20] [--tiles] [--render-times]
+    python bench/bench_topology.py [SOURCE ...] [--synthetic] [--scales 20] [--tiles] [--render-times [--morph-only]]
 
 ``--synthetic`` adds two contour sets made like GDAL's (tests/synthetic_rasters.py): lines of one level touching at
 saddles, at 10 m, and a dense 2 m interval.
@@ -32,6 +33,7 @@ from pathlib import Path
 import mapbox_vector_tile
 import numpy as np
 
+import engine.serve.renderer as renderer_module
 from engine import BuildParams, build_contour_set, read_source, sample_contours_path
 from engine.baselines import simplify_at_scale
 from engine.ccsm.regression import t_for_scale
@@ -156,9 +158,29 @@ def tile_table(source: Path, smallest: float, largest: float) -> None:
             print(f"{z:>5} {tiles:>6} {crossing:>9} {exact:>11}")
 
 
-def render_times(source: Path, zooms: range) -> None:
+class HeldCount:
+    """Counts the contours the renderer's morph tiles hold still: wraps the ``untangle`` it calls."""
+
+    def __init__(self) -> None:
+        self.per_tile: list[int] = []
+        self.untangle = renderer_module.untangle
+
+    def __enter__(self) -> HeldCount:
+        def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
+            parts, held = self.untangle(*args, **kwargs)
+            self.per_tile.append(held)
+            return parts, held
+
+        renderer_module.untangle = counted
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        renderer_module.untangle = self.untangle
+
+
+def render_times(source: Path, zooms: range, morph_only: bool = False) -> None:
     """Render time of every tile of ``zooms`` with snap rounding off and on (in process, warm caches)."""
-    with tempfile.TemporaryDirectory() as folder:
+    with tempfile.TemporaryDirectory() as folder, HeldCount() as held:
         store = CCSStore(Path(folder) / "bench.sqlite")
         build_dataset(store, SourceSpec(source, "bench", "bench"))
         variants = {flag: Renderer(store, TileOptions(snap_rounding=flag)) for flag in (False, True)}
@@ -167,10 +189,11 @@ def render_times(source: Path, zooms: range) -> None:
         for r in variants.values():  # pack, labels and compiled kernels ready before timing
             r.tile("bench", *tiles[0])
             r.morph_tile("bench", *tiles[0])
+        held.per_tile.clear()
         times: dict[tuple[str, bool], list[float]] = {}
         differ = dict.fromkeys(("tile", "morph"), 0)
         for tile in tiles:
-            for kind in ("tile", "morph"):
+            for kind in ("morph",) if morph_only else ("tile", "morph"):
                 for zoom in (tile.z, tile.z + 0.5) if kind == "tile" else (None,):
                     data = {}
                     for flag, r in variants.items():
@@ -188,6 +211,8 @@ def render_times(source: Path, zooms: range) -> None:
                 f"max {ms.max():7.1f} ms  (n = {len(ms)})"
             )
         print(f"tiles that differ: {differ['tile']} per-level tiles (snap-rounded), {differ['morph']} morph tiles")
+        counts = np.array(held.per_tile)
+        print(f"morph tiles holding contours still: {np.count_nonzero(counts)}, {counts.sum()} contours held in all")
 
 
 def main() -> None:
@@ -199,6 +224,7 @@ def main() -> None:
     parser.add_argument("--max-scale", type=float, default=500_000.0, help="smallest scale's denominator")
     parser.add_argument("--tiles", action="store_true", help="also count proper crossings in the tiles")
     parser.add_argument("--render-times", action="store_true", help="tile render times, snap rounding off and on")
+    parser.add_argument("--morph-only", action="store_true", help="with --render-times: morph tiles only")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as folder:
         sources = list(args.sources) or ([] if args.synthetic else [sample_contours_path()])
@@ -207,7 +233,7 @@ def main() -> None:
         scales = np.geomspace(args.min_scale, args.max_scale, args.scales)
         for source in sources:
             if args.render_times:
-                render_times(Path(source), range(8, 15))
+                render_times(Path(source), range(8, 15), args.morph_only)
                 continue
             scale_table(Path(source), scales)
             if args.tiles:

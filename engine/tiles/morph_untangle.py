@@ -1,19 +1,19 @@
-"""Morph tiles whose interpolated geometry never crosses: find the contours that would meet while a client
+"""Morph tiles whose interpolated geometry never crosses: find the contours that would cross while a client
 morphs them, and hold those still at one snap-rounded shape.
 
 A client draws a morph tile's contour at fraction ``f`` of the level as ``start + w(f) (end - start)``, each
 contour with its own ``w`` (docs/morph-tiles.md), piecewise linear in ``f`` between the eight steps. Inside one
-step every vertex therefore moves on a straight line at a constant pace, and ``engine.ccsm.topology.SweepIndex``
-finds, exactly, every pair of lines that comes to meet (touch or cross) at some moment of the step; lines that
-cross already at the start are found directly (``engine.tiles.crossings``). Both ends are rounded to the grid
-one vertex at a time, so lines closer than a grid unit can meet although their exact slices never do
+step every vertex therefore moves on a straight line at a constant pace, and ``engine.tiles.morph_crossings``
+finds, exactly, every pair of contours that crosses properly at some moment of the step, at any fraction a
+client may draw. Both ends are rounded to the grid one vertex at a time, so lines closer than a grid unit can
+cross although their exact slices never do; lines the grid only forces to touch are left moving
 (docs/design.md section 4.8).
 
 Each contour of such a pair that still moves is *held*: both its layers get one snap-rounded shape
 (``engine.tiles.snap_round``, rounded together with every contour of the tile; the renderer takes the shape at
 the level's end, where every contour of the tile is shown), so it is drawn still through the level. Held
-contours never cross one another (snap rounding); a moving contour that meets a held one is held in turn, and
-the check repeats until no pair with a moving contour meets. It ends: once every contour is held the tile is
+contours never cross one another (snap rounding); a moving contour that crosses a held one is held in turn, and
+the check repeats until no pair with a moving contour crosses. It ends: once every contour is held the tile is
 one snap-rounded drawing.
 """
 
@@ -25,14 +25,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from engine.ccsm.topology import SweepIndex, lines_cross_properly
-from engine.tiles.crossings import crossing_owner_pairs
+from engine.tiles.morph_crossings import morph_crossing_pairs
 from engine.tiles.runs import ranges
 
-#: Frames per level the ccsm-morph plugin draws (web/plugin): the moments a held contour must not cross at.
-FRAMES_PER_LEVEL = 32
-#: Rounds of holding contours before a tile holds them all: each round rebuilds the sweep index, and a long
-#: chain of contours each meeting the next is cheaper to hold at once.
+#: Rounds of holding contours before a tile holds them all: each round checks the tile again, and a long
+#: chain of contours each crossing the next is cheaper to hold at once.
 MAX_ROUNDS = 3
 
 
@@ -76,55 +73,15 @@ def morph_weights(t_samples: NDArray[np.float64]) -> NDArray[np.float64]:
     return w
 
 
-def _cross_in_frames(
-    starts: list[NDArray[np.float64]],
-    ends: list[NDArray[np.float64]],
-    w: NDArray[np.float64],
-    owner: NDArray[np.int64],
-    i: int,
-    j: int,
-    k: int,
-) -> bool:
-    """Whether parts i and j, which meet somewhere in step k, cross properly in a frame the plugin draws there
-    (FRAMES_PER_LEVEL per level; lines that only touch on the grid need no holding)."""
-    per_step = FRAMES_PER_LEVEL // (w.shape[0] - 1)
-    for m in range(per_step + 1):
-        lam = m / per_step
-        wi = w[k, owner[i]] + lam * (w[k + 1, owner[i]] - w[k, owner[i]])
-        wj = w[k, owner[j]] + lam * (w[k + 1, owner[j]] - w[k, owner[j]])
-        a = starts[i] + wi * (ends[i] - starts[i])
-        b = starts[j] + wj * (ends[j] - starts[j])
-        if lines_cross_properly(a, b):
-            return True
-    return False
-
-
-def meeting_owners(parts: MorphParts, w: NDArray[np.float64], held: NDArray[np.bool_]) -> set[int]:
-    """Contours not yet held that meet another contour at some moment of the level (one of the two moving)."""
-    if len(parts.part_len) < 2:
-        return set()
-    cut = np.cumsum(parts.part_len)[:-1]
-    starts = np.split(parts.start.astype(np.float64), cut)
-    ends = np.split(parts.end.astype(np.float64), cut)
-    index = SweepIndex.of(starts, ends)
-    owner = parts.part_owner
-    # The sweep finds lines that come to meet; lines crossing already at the start are found directly.
-    pairs = crossing_owner_pairs(parts.start, parts.part_len, owner)
-    steps = w.shape[0] - 1
-    for k in range(steps):
-        for i, j in index.contacts(w[k][owner], w[k + 1][owner]):
-            a, b = int(owner[i]), int(owner[j])
-            if a != b and (a, b) not in pairs and _cross_in_frames(starts, ends, w, owner, i, j, k):
-                pairs.add((a, b))
-    found: set[int] = set()
-    for a, b in pairs:
-        if a != b and not (held[a] and held[b]):
-            found.update(o for o in (a, b) if not held[o])
-    return found
+def crossing_owners(parts: MorphParts, w: NDArray[np.float64], held: NDArray[np.bool_]) -> set[int]:
+    """Contours not yet held that cross another contour properly at some fraction of the level (one of the two
+    moving; ``engine.tiles.morph_crossings``)."""
+    pairs = morph_crossing_pairs(parts.start, parts.end, parts.part_len, parts.part_owner, w, skip=held)
+    return {o for pair in pairs for o in pair if not held[o]}
 
 
 def untangle(parts: MorphParts, w: NDArray[np.float64], snap: Callable[[], MorphParts]) -> tuple[MorphParts, int]:
-    """The morph tile's parts with every contour that would meet another while morphing held still.
+    """The morph tile's parts with every contour that would cross another while morphing held still.
 
     Parameters
     ----------
@@ -134,7 +91,7 @@ def untangle(parts: MorphParts, w: NDArray[np.float64], snap: Callable[[], Morph
         (9, n) weight of the end geometry per contour at the level's nine steps (:func:`morph_weights`).
     snap
         Gives the same contours' exact shape at one moment of the level, snap-rounded all together (``start``
-        equal to ``end``); called only when some contours meet.
+        equal to ``end``); called only when some contours cross.
 
     Returns
     -------
@@ -145,12 +102,12 @@ def untangle(parts: MorphParts, w: NDArray[np.float64], snap: Callable[[], Morph
     current = parts
     snapped: MorphParts | None = None
     for _ in range(MAX_ROUNDS):
-        meeting = meeting_owners(current, w, held)
-        if not meeting:
+        crossing = crossing_owners(current, w, held)
+        if not crossing:
             return current, int(held.sum())
-        held[list(meeting)] = True
+        held[list(crossing)] = True
         snapped = snap() if snapped is None else snapped
         current = MorphParts.joined(parts.of_owners(~held), snapped.of_owners(held))
-    # Still meeting after a few rounds: hold every contour, one snap-rounded drawing needs no more checks.
+    # Still crossing after a few rounds: hold every contour, one snap-rounded drawing needs no more checks.
     snapped = snap() if snapped is None else snapped
     return snapped, w.shape[1]

@@ -1,13 +1,17 @@
-"""Morph tiles: contours that would meet while a client morphs them are held still (engine.tiles.morph_untangle,
-issue 13). The client's drawing is recomputed here at fine steps of the level and checked with
-``engine.ccsm.topology.proper_crossing_pairs``."""
+"""Morph tiles: contours that would cross while a client morphs them are held still (engine.tiles.morph_untangle,
+issue 13), at any fraction of the level. The client's drawing is recomputed here at fine steps of the level and
+at chosen moments, and checked with ``engine.ccsm.topology.proper_crossing_pairs``."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from engine.ccsm.topology import proper_crossing_pairs
+from engine.tiles.morph_crossings import morph_crossing_pairs
 from engine.tiles.morph_untangle import MorphParts, morph_weights, untangle
+
+#: Frames per level the ccsm-morph plugin draws (web/plugin/src/index.js, stepsPerZoom).
+PLUGIN_FRAMES = 32
 
 
 def parts_of(starts: list[list[list[int]]], ends: list[list[list[int]]]) -> MorphParts:
@@ -95,3 +99,84 @@ def test_lines_crossing_already_at_the_start_are_held() -> None:
     out, held = untangle(parts, W, snap)
     assert held == 2
     assert crossings_through_the_level(out, W) == 0
+
+
+# B, a short upright segment, sweeps 320 units to the right through the level (w = f: 10 units per plugin frame)
+# and passes over A, one unit long, only while its x is in (0, 1): f in (165/320, 166/320), between the plugin's
+# frames 16/32 and 17/32. At every frame the two are apart.
+SPUR = [[0, 0], [1, 0]]
+SWEEPER_START, SWEEPER_END = [[-165, -1], [-165, 1]], [[155, -1], [155, 1]]
+BETWEEN_FRAMES = 165.5 / 320
+
+
+def test_issue_13_a_crossing_between_the_plugins_frames_is_held() -> None:
+    parts = parts_of([SPUR, SWEEPER_START], [SPUR, SWEEPER_END])
+    frames = np.arange(PLUGIN_FRAMES + 1) / PLUGIN_FRAMES
+    assert all(not proper_crossing_pairs(drawn_at(parts, W, f)) for f in frames)  # no frame shows it
+    assert proper_crossing_pairs(drawn_at(parts, W, BETWEEN_FRAMES)) == {(0, 1)}  # a client at 0.517 does
+    snap, calls = held_shapes({0: SPUR, 1: SWEEPER_END})
+    out, held = untangle(parts, W, snap)
+    assert held == 2 and calls  # both, each at its held shape
+    assert not proper_crossing_pairs(drawn_at(out, W, BETWEEN_FRAMES))
+    assert crossings_through_the_level(out, W) == 0
+
+
+def test_a_line_grazing_another_at_one_moment_is_not_held() -> None:
+    # B's lower end slides down onto A and stops there at the level's end: touching (a vertex on the other
+    # line, which the grid may force on lines closer than a unit), never crossing.
+    b_end = [[5, 0], [5, 4]]
+    parts = parts_of([A, [[5, 2], [5, 4]]], [A, b_end])
+    snap, calls = held_shapes({0: A, 1: b_end})
+    out, held = untangle(parts, W, snap)
+    assert held == 0 and not calls
+    np.testing.assert_array_equal(out.end, parts.end)
+
+
+def sides(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Sign of the turn a -> b -> c, broadcast over (..., 2) points."""
+    turn = (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0])
+    return np.sign(turn)
+
+
+def brute_force_pairs(starts, ends, w, samples: int) -> set[tuple[int, int]]:  # type: ignore[no-untyped-def]
+    """Pairs seen crossing properly at ``samples`` moments of every step (a lower bound of the exact answer)."""
+    lam = np.linspace(0, 1, samples)
+    wf = np.concatenate([w[k] + lam[:, None] * (w[k + 1] - w[k]) for k in range(w.shape[0] - 1)])  # (moments, n)
+    lines = [s + wf[:, i, None, None] * (e - s) for i, (s, e) in enumerate(zip(starts, ends, strict=True))]
+    found = set()
+    for i in range(len(lines)):
+        for j in range(i + 1, len(lines)):
+            p1, p2 = lines[i][:, :-1, None], lines[i][:, 1:, None]
+            q1, q2 = lines[j][:, None, :-1], lines[j][:, None, 1:]
+            proper = (sides(p1, p2, q1) * sides(p1, p2, q2) < 0) & (sides(q1, q2, p1) * sides(q1, q2, p2) < 0)
+            if proper.any():
+                found.add((i, j))
+    return found
+
+
+def test_exact_pairs_agree_with_fine_sampling_on_random_motions() -> None:
+    # Short random lines on a small grid, each moving with its own piecewise-linear weights: every pair that
+    # sampling 41 moments per step sees crossing is found, and every pair found that those moments miss is seen
+    # by 2,001 moments per step (a crossing found is real, not a rounding artefact).
+    rng = np.random.default_rng(13)
+    missed, between_samples, unconfirmed, found_total = 0, 0, 0, 0
+    for _ in range(60):
+        n = 5
+        lens = rng.integers(2, 5, n)
+        start = rng.integers(0, 24, (lens.sum(), 2))
+        end = start + rng.integers(-8, 9, (lens.sum(), 2))
+        w = np.sort(rng.random((9, n)), axis=0)
+        w = (w - w[0]) / (w[-1] - w[0])
+        exact = morph_crossing_pairs(start, end, lens, np.arange(n), w)
+        cut = np.cumsum(lens)[:-1]
+        starts, ends = np.split(start.astype(float), cut), np.split(end.astype(float), cut)
+        coarse = brute_force_pairs(starts, ends, w, 41)
+        missed += len(coarse - exact)
+        if exact - coarse:
+            between_samples += len(exact - coarse)
+            unconfirmed += len(exact - coarse - brute_force_pairs(starts, ends, w, 2001))
+        found_total += len(exact)
+    assert found_total > 100  # the motions really cross
+    assert between_samples > 0  # and some only between the coarse moments
+    assert missed == 0
+    assert unconfirmed == 0

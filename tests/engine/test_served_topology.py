@@ -223,20 +223,33 @@ def morph_t(props: dict, f: float) -> float:
     return samples[k] + (8 * f - k) * (samples[k + 1] - samples[k])
 
 
-def test_morph_tiles_never_cross_at_the_plugins_steps(served: tuple[Renderer, str]) -> None:
-    # The ccsm-morph plugin draws 32 steps per level (web/plugin): every one of them, in every morph tile.
+#: The ccsm-morph plugin's frames per level (web/plugin/src/index.js, stepsPerZoom) and, per tile, how many other
+#: fractions are drawn at random: a client may draw a morph tile at any fraction (docs/morph-tiles.md).
+PLUGIN_FRAMES, RANDOM_FRACTIONS = 32, 32
+
+
+def fractions_to_draw(rng: np.random.Generator) -> np.ndarray:
+    """The plugin's frames, the middle between each two, and random fractions in [0, 1)."""
+    frames = np.arange(PLUGIN_FRAMES) / PLUGIN_FRAMES
+    return np.concatenate([frames, frames + 0.5 / PLUGIN_FRAMES, rng.random(RANDOM_FRACTIONS)])
+
+
+def test_morph_tiles_never_cross_at_any_fraction(served: tuple[Renderer, str]) -> None:
+    # Every morph tile drawn as a client draws it at the plugin's 32 frames per level, half-way between them, and
+    # at random fractions: no two contours apart in the input cross properly at any of them.
     renderer, dataset = served
     allowed = met_in_input(renderer, dataset)
     bounds = Bounds(*renderer.info(dataset)[0].bounds_3857)
+    rng = np.random.default_rng(13)
     drawn = 0
     bad = []
     for z in sorted({z for z, _ in zooms_to_check(renderer, dataset)}):
         for tile in tiles_covering(bounds, z):
             morph = decode(renderer.morph_tile(dataset, *tile).data)
-            for step in range(32):
-                lines = morph_drawing(morph, z, step / 32)
+            for f in fractions_to_draw(rng):
+                lines = morph_drawing(morph, z, float(f))
                 drawn += bool(lines)
                 if pairs := proper_new_crossings(lines, allowed):
-                    bad.append((tile, step, sorted(pairs)[:3]))
-    assert drawn > 100
-    assert not bad, f"contours apart in the input cross in a morph tile (tile, step of 32, pairs): {bad}"
+                    bad.append((tile, round(float(f), 4), sorted(pairs)[:3]))
+    assert drawn > 200
+    assert not bad, f"contours apart in the input cross in a morph tile (tile, fraction, pairs): {bad[:10]}"
