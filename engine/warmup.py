@@ -33,7 +33,23 @@ def warm_up() -> float:
             simplify_at_scale(method, coords, closed, 250_000)
         row_significance(coords, coords * 0.9)
     _render_one_tile(ring, line)
+    _check_tile_topology()
     return time.perf_counter() - start
+
+
+def _check_tile_topology() -> None:
+    """The kernels that keep served lines from crossing (docs/design.md section 4.8): the grid crossing check,
+    snap rounding and the morph check, on two lines that cross."""
+    from engine.tiles.crossings import crossing_owner_pairs
+    from engine.tiles.morph_crossings import morph_crossing_pairs
+    from engine.tiles.snap_round import snap_round
+
+    start = np.array([[0, 0], [10, 0], [4, 1], [6, 1]], dtype=np.int64)
+    end = np.array([[0, 0], [10, 0], [4, -1], [6, 3]], dtype=np.int64)
+    part_len, owner = np.array([2, 2], dtype=np.int64), np.array([0, 1], dtype=np.int64)
+    crossing_owner_pairs(end, part_len, owner)
+    snap_round(end.astype(np.float64), part_len)
+    morph_crossing_pairs(start, end, part_len, owner, np.array([[0.0, 0.0], [0.0, 0.5], [0.0, 1.0]]))
 
 
 def _render_one_tile(ring: np.ndarray, line: np.ndarray) -> None:
