@@ -3,7 +3,7 @@
 #   make test   install into .venv/, then ruff, import contracts, mypy, the web checks and the whole test suite
 # Everything Python runs from the project's virtual environment .venv/ (made with $(PYTHON) -m venv), so a
 # system Python that refuses installs (PEP 668, "externally-managed-environment") is never pip-installed into.
-# Missing system tools (python3-venv, node/npm, chromium) are installed with apt-get when run as root on
+# Missing system tools (python3-venv, node/npm, chromium, QGIS's Python bindings) are installed with apt-get when run as root on
 # Debian/Ubuntu; otherwise make stops and says which command to run.
 PYTHON ?= python3
 VENV ?= .venv
@@ -15,7 +15,7 @@ CHROMIUM ?= /usr/bin/chromium
 PYTEST_ARGS ?=
 NPM_DIRS := $(wildcard web web/plugin tests/app/node bench/geojsonvt)
 
-.PHONY: run test install bench evaluate lint need-node need-chromium
+.PHONY: run test install bench evaluate lint need-node need-chromium need-qgis
 # Steps install system packages and share one venv: never run them side by side (make -j).
 .NOTPARALLEL:
 
@@ -42,6 +42,10 @@ need-node:
 need-chromium:
 	$(call need,[ -x "$(CHROMIUM)" ],chromium fonts-dejavu-core,Chromium ($(CHROMIUM)) for the browser tests)
 
+# The QGIS client test runs Debian's own /usr/bin/python3, which sees the bindings (the venv does not).
+need-qgis:
+	$(call need,/usr/bin/python3 -c "import qgis.core" >/dev/null 2>&1,--no-install-recommends python3-qgis,QGIS's Python bindings (python3-qgis) for the QGIS client test)
+
 # The virtual environment. Debian's python3 makes a venv only with python3-venv (ensurepip) installed.
 $(BIN)/pip:
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found; install Python >= 3.11 or run make PYTHON=/path/to/python3" >&2; exit 1; }
@@ -65,7 +69,7 @@ run: install
 # Never passes with a tool missing: node and chromium are required (the tests fail rather than skip without
 # them), and pytest's status 5 (no tests collected) fails make like any other non-zero status.
 # Tools are checked first, so a missing one stops make before the long install.
-test: need-node need-chromium install lint
+test: need-node need-chromium need-qgis install lint
 	cd web && npm run --if-present test
 	cd web/plugin && npm run --if-present test
 	$(BIN)/python -m pytest -q $(PYTEST_ARGS)
