@@ -45,9 +45,7 @@ def topobathy() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return data["topo"].astype(np.float64), data["longitude"] - 360.0, data["latitude"].astype(np.float64)
 
 
-def write_topobathy_contours(
-    path: Path, interval: float, window: tuple[slice, slice] = TOPOBATHY_WINDOW
-) -> Path:
+def write_topobathy_contours(path: Path, interval: float, window: tuple[slice, slice] = TOPOBATHY_WINDOW) -> Path:
     """Heights and depths of a window of topobathy.npz contoured at multiples of ``interval``, in lon/lat; the
     grid's own longitudes and latitudes place each node (the rows are not exactly evenly spaced)."""
     z, lon, lat = topobathy()
