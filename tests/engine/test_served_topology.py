@@ -43,6 +43,8 @@ class ContourData:
     min_lines: int
     min_touching: int  # pairs of one level touching at saddle nodes in the input
     min_tiles: int = 21  # tiles x fractions the tile tests look at (the whole of Maunga Whau fits in one tile)
+    #: Whether some lines come closer than the quantisation's reach, so that plain rounding draws them crossing.
+    lines_within_a_tile_unit: bool = True
 
 
 def generated(seed: int, beta: float, n: int, interval: float, relief: float) -> Callable[[Path], Path]:
@@ -58,13 +60,19 @@ def generated(seed: int, beta: float, n: int, interval: float, relief: float) ->
 DATA = {
     "saddle": ContourData(generated(7, 2.5, 56, 10.0, 220.0), min_lines=300, min_touching=5),
     "dense": ContourData(generated(8, 2.9, 40, 2.0, 70.0), min_lines=300, min_touching=5),
-    # Real DEMs. Whole-metre heights on a 10 m grid touch at few saddles; the 2-arc-minute topobathy grid
-    # puts hardly any node exactly on a 50 m level, so its lines never touch: that set is about steep slopes.
+    # Real DEMs. Whole-metre heights on a 10 m grid touch at few saddles. The 2-arc-minute topobathy grid puts
+    # hardly any node exactly on a 50 m level, so its lines never touch, and its lines (one node per 2.4 km) stay
+    # farther apart than the grid's rounding reaches at every zoom checked (at 20 m as well): that set is about
+    # long, steep real slopes through simplify and every tile, and shows that snap rounding changes none of them.
     "maunga-whau-1m": ContourData(
         lambda path: write_maunga_whau_contours(path, 1.0), min_lines=150, min_touching=3, min_tiles=18
     ),
     "topobathy-50m": ContourData(
-        lambda path: write_topobathy_contours(path, 50.0), min_lines=250, min_touching=0, min_tiles=300
+        lambda path: write_topobathy_contours(path, 50.0),
+        min_lines=250,
+        min_touching=0,
+        min_tiles=300,
+        lines_within_a_tile_unit=False,
     ),
 }
 LARGEST_SCALE, SMALLEST_SCALE = 40_000.0, 1_000_000.0
@@ -206,7 +214,7 @@ def test_plain_rounding_draws_lines_closer_than_the_grid_crossing(served: tuple[
         assert np.all(gaps > 0), f"z{z} 1:{scale:.0f}: pairs crossing in the exact slices: {sorted(pairs)}"
         assert np.all(gaps < QUANTISATION_REACH), f"z{z} 1:{scale:.0f}: crossing lines {gaps.max():.2f} units apart"
     assert checked >= DATA[dataset].min_tiles
-    assert crossed > 0
+    assert crossed > 0 if DATA[dataset].lines_within_a_tile_unit else crossed == 0
     print(f"{dataset} {'morph' if morph else 'tiles'}: {crossed} pairs crossing on the grid in {checked} tiles")
 
 
