@@ -23,10 +23,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-import shapely
 from numpy.typing import NDArray
 
-from engine.ccsm.topology import SweepIndex
+from engine.ccsm.topology import SweepIndex, lines_cross_properly
 from engine.tiles.crossings import crossing_owner_pairs
 from engine.tiles.runs import ranges
 
@@ -77,55 +76,27 @@ def morph_weights(t_samples: NDArray[np.float64]) -> NDArray[np.float64]:
     return w
 
 
-def _orientation(a: NDArray[np.float64], b: NDArray[np.float64], c: NDArray[np.float64]) -> NDArray[np.float64]:
-    return (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0])
-
-
-def _segment_pairs(
-    parts: MorphParts, w: NDArray[np.float64], k: int, part_pairs: set[tuple[int, int]]
-) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]:
-    """Segments (first points p, q) of the part pairs that can meet in step k, and every point's place at the
-    step's start and end (a point moves straight between them, at the pace of its contour's ``w``)."""
-    owner_of_point = np.repeat(parts.part_owner, parts.part_len)
-    part_of_point = np.repeat(np.arange(len(parts.part_len)), parts.part_len)
-    start, end = parts.start.astype(np.float64), parts.end.astype(np.float64)
-    at0 = start + w[k, owner_of_point][:, None] * (end - start)
-    at1 = start + w[k + 1, owner_of_point][:, None] * (end - start)
-    involved = np.zeros(len(parts.part_len), dtype=bool)
-    involved[[i for pair in part_pairs for i in pair]] = True
-    # Segment s runs from point s to s + 1; only the segments of parts in some pair.
-    first = np.flatnonzero((part_of_point[:-1] == part_of_point[1:]) & involved[part_of_point[:-1]])
-    ends = np.stack([at0[first], at0[first + 1], at1[first], at1[first + 1]])
-    lo, hi = ends.min(axis=0), ends.max(axis=0)  # holds the segment at every moment of the step
-    boxes = shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1])
-    p, q = shapely.STRtree(boxes).query(boxes)
-    n_parts = len(parts.part_len)
-    wanted = np.array([i * n_parts + j for i, j in part_pairs], dtype=np.int64)
-    keys = part_of_point[first[p]].astype(np.int64) * n_parts + part_of_point[first[q]]
-    keep = np.isin(keys, wanted)
-    return first[p[keep]], first[q[keep]], at0, at1
-
-
 def _cross_in_frames(
-    parts: MorphParts, w: NDArray[np.float64], k: int, part_pairs: set[tuple[int, int]]
-) -> set[tuple[int, int]]:
-    """Contour pairs (a, b), a < b, among ``part_pairs`` (parts that meet somewhere in step k) that cross
-    properly in a frame the plugin draws there (FRAMES_PER_LEVEL per level; lines that only touch on the grid
-    need no holding). All pairs of a step are tested together, segment by segment, over every frame at once."""
-    if not part_pairs:
-        return set()
-    p, q, at0, at1 = _segment_pairs(parts, w, k, part_pairs)
+    starts: list[NDArray[np.float64]],
+    ends: list[NDArray[np.float64]],
+    w: NDArray[np.float64],
+    owner: NDArray[np.int64],
+    i: int,
+    j: int,
+    k: int,
+) -> bool:
+    """Whether parts i and j, which meet somewhere in step k, cross properly in a frame the plugin draws there
+    (FRAMES_PER_LEVEL per level; lines that only touch on the grid need no holding)."""
     per_step = FRAMES_PER_LEVEL // (w.shape[0] - 1)
-    lam = np.arange(per_step + 1) / per_step
-    # Every frame's place of the four points of each segment pair: (frames, pairs, 2).
-    a1, a2, b1, b2 = (at0[i][None] + lam[:, None, None] * (at1[i] - at0[i])[None] for i in (p, p + 1, q, q + 1))
-    proper = (_orientation(a1, a2, b1) * _orientation(a1, a2, b2) < 0) & (
-        _orientation(b1, b2, a1) * _orientation(b1, b2, a2) < 0
-    )
-    owner_of_point = np.repeat(parts.part_owner, parts.part_len)
-    hit = proper.any(axis=0)
-    oa, ob = owner_of_point[p[hit]], owner_of_point[q[hit]]
-    return {(int(min(a, b)), int(max(a, b))) for a, b in zip(oa.tolist(), ob.tolist(), strict=True)}
+    for m in range(per_step + 1):
+        lam = m / per_step
+        wi = w[k, owner[i]] + lam * (w[k + 1, owner[i]] - w[k, owner[i]])
+        wj = w[k, owner[j]] + lam * (w[k + 1, owner[j]] - w[k, owner[j]])
+        a = starts[i] + wi * (ends[i] - starts[i])
+        b = starts[j] + wj * (ends[j] - starts[j])
+        if lines_cross_properly(a, b):
+            return True
+    return False
 
 
 def meeting_owners(parts: MorphParts, w: NDArray[np.float64], held: NDArray[np.bool_]) -> set[int]:
@@ -141,13 +112,10 @@ def meeting_owners(parts: MorphParts, w: NDArray[np.float64], held: NDArray[np.b
     pairs = crossing_owner_pairs(parts.start, parts.part_len, owner)
     steps = w.shape[0] - 1
     for k in range(steps):
-        to_check = set()
         for i, j in index.contacts(w[k][owner], w[k + 1][owner]):
             a, b = int(owner[i]), int(owner[j])
-            # Held contours never cross one another (snap rounding): no frame to check.
-            if a != b and not (held[a] and held[b]) and (min(a, b), max(a, b)) not in pairs:
-                to_check.add((i, j))
-        pairs |= _cross_in_frames(parts, w, k, to_check)
+            if a != b and (a, b) not in pairs and _cross_in_frames(starts, ends, w, owner, i, j, k):
+                pairs.add((a, b))
     found: set[int] = set()
     for a, b in pairs:
         if a != b and not (held[a] and held[b]):
