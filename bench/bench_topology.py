@@ -14,7 +14,7 @@ With ``--render-times``, every tile of z8-z14 over the source is rendered in pro
 rounding, as before issue 13) and on: per-level tiles at z and z + 0.5, and morph tiles; it prints render time
 p50/p95 of each and how many tiles came out different (snap-rounded tiles, morph tiles with contours held).
 
-    python bench/bench_topology.py [SOURCE ...] [--synthetic] [--real] [--scales 20] [--tiles] [--render-times]
+    python bench/bench_topology.py [SOURCE ...] [--synthetic] [--scales 20] [--tiles] [--render-times]
 
 ``--synthetic`` adds two contour sets made like GDAL's (tests/synthetic_rasters.py): lines of one level touching at
 saddles, at 10 m, and a dense 2 m interval. ``--real`` adds the real DEMs of tests/real_dems.py, contoured the same
