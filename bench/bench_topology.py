@@ -18,7 +18,8 @@ how many contours the morph tiles hold still (docs/morph-tiles.md). ``--morph-on
     python bench/bench_topology.py [SOURCE ...] [--synthetic] [--scales 20] [--tiles] [--render-times [--morph-only]]
 
 ``--synthetic`` adds two contour sets made like GDAL's (tests/synthetic_rasters.py): lines of one level touching at
-saddles, at 10 m, and a dense 2 m interval.
+saddles, at 10 m, and a dense 2 m interval. ``--real`` adds the real DEMs of tests/real_dems.py, contoured the same
+way: Maunga Whau at 1 m and 2 m, and Howe Sound / the Coast Mountains from matplotlib's topobathy.npz at 50 m.
 """
 
 from __future__ import annotations
@@ -68,6 +69,17 @@ def synthetic_sources(folder: Path) -> list[Path]:
         path = folder / f"{name}.geojson"
         made.append(write_exact_level_geojson(path, z, interval, west=10.0, north=47.0, cell_deg=1 / 1200))
     return made
+
+
+def real_sources(folder: Path) -> list[Path]:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from real_dems import write_maunga_whau_contours, write_topobathy_contours
+
+    return [
+        write_maunga_whau_contours(folder / "maunga-whau-1m.geojson", 1.0),
+        write_maunga_whau_contours(folder / "maunga-whau-2m.geojson", 2.0),
+        write_topobathy_contours(folder / "topobathy-50m.geojson", 50.0),
+    ]
 
 
 def scale_table(source: Path, scales: np.ndarray) -> None:
@@ -219,6 +231,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("sources", nargs="*", type=Path)
     parser.add_argument("--synthetic", action="store_true", help="add GDAL-style saddle and dense 2 m data")
+    parser.add_argument("--real", action="store_true", help="add the real DEMs of tests/real_dems.py")
     parser.add_argument("--scales", type=int, default=20)
     parser.add_argument("--min-scale", type=float, default=50_000.0, help="largest scale's denominator")
     parser.add_argument("--max-scale", type=float, default=500_000.0, help="smallest scale's denominator")
@@ -227,9 +240,11 @@ def main() -> None:
     parser.add_argument("--morph-only", action="store_true", help="with --render-times: morph tiles only")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as folder:
-        sources = list(args.sources) or ([] if args.synthetic else [sample_contours_path()])
+        sources = list(args.sources) or ([] if args.synthetic or args.real else [sample_contours_path()])
         if args.synthetic:
             sources += synthetic_sources(Path(folder))
+        if args.real:
+            sources += real_sources(Path(folder))
         scales = np.geomspace(args.min_scale, args.max_scale, args.scales)
         for source in sources:
             if args.render_times:

@@ -5,6 +5,7 @@ A plain module (not conftest.py) so test modules can import it by name: ``from s
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -81,20 +82,36 @@ def write_exact_level_geojson(
 ) -> Path:
     """Contours of ``z`` at exact levels (:func:`exact_level_contours`) as a GeoJSON file in lon/lat, with
     ``ele``: data like GDAL's, with lines of one level touching at saddles."""
+
+    def lonlat(pts: np.ndarray) -> np.ndarray:
+        return np.column_stack([west + pts[:, 0] * cell_deg, north - pts[:, 1] * cell_deg])
+
+    return write_exact_level_lines(path, z, interval, lonlat)
+
+
+def write_exact_level_lines(
+    path: Path, z: np.ndarray, interval: float, to_xy: Callable[[np.ndarray], np.ndarray], crs: str | None = None
+) -> Path:
+    """Contours of ``z`` at exact levels as a GeoJSON file with ``ele``, as ``gdal_contour`` writes them:
+    ``to_xy`` maps (n, 2) grid points (column, row) to coordinates in ``crs`` (None: lon/lat, RFC 7946), which
+    is then named in a ``crs`` member."""
     import json
 
     features = []
     for k, (level, pts, closed) in enumerate(exact_level_contours(z, interval)):
-        lonlat = np.column_stack([west + pts[:, 0] * cell_deg, north - pts[:, 1] * cell_deg])
+        xy = to_xy(pts)
         if closed:
-            lonlat = np.vstack([lonlat, lonlat[:1]])
+            xy = np.vstack([xy, xy[:1]])
         features.append(
             {
                 "type": "Feature",
                 "id": k,
                 "properties": {"ele": level},
-                "geometry": {"type": "LineString", "coordinates": lonlat.tolist()},
+                "geometry": {"type": "LineString", "coordinates": xy.tolist()},
             }
         )
-    path.write_text(json.dumps({"type": "FeatureCollection", "features": features}))
+    collection: dict = {"type": "FeatureCollection", "features": features}
+    if crs is not None:
+        collection["crs"] = {"type": "name", "properties": {"name": crs}}
+    path.write_text(json.dumps(collection))
     return path
