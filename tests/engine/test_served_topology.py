@@ -23,7 +23,7 @@ import shapely
 from real_dems import write_maunga_whau_contours, write_topobathy_contours
 from synthetic_rasters import fractal_heights, write_exact_level_geojson
 
-from engine.ccsm.topology import INPUT_TOUCH_M, crossing_pairs, proper_crossing_pairs
+from engine.ccsm.topology import INPUT_TOUCH_M, crossing_pairs
 from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import Renderer
 from engine.serve.simplify import simplify
@@ -144,10 +144,32 @@ def tile_lines(layer: dict) -> dict[int, list[np.ndarray]]:
 
 
 def proper_new_crossings(lines: dict[int, list[np.ndarray]], allowed: set[tuple[int, int]]) -> set[tuple[int, int]]:
-    fids = [fid for fid, parts in lines.items() for _ in parts]
-    parts = [part for part in lines.values() for part in part]
-    found = {(fids[a], fids[b]) for a, b in proper_crossing_pairs(parts) if fids[a] != fids[b]}
-    return new_pairs(found, allowed)
+    return new_pairs(properly_crossing_contours(lines), allowed)
+
+
+def properly_crossing_contours(lines: dict[int, list[np.ndarray]]) -> set[tuple[int, int]]:
+    """Pairs of contours (fid order) with two segments that cross at a point inside both: this test's own
+    check, independent of the engine's. Every segment of the drawing at once: candidate pairs from a shapely
+    tree of the segments, then the four orientation signs (touching gives a zero sign, never a crossing)."""
+    owners, segments = [], []
+    for fid, parts in lines.items():
+        for part in parts:
+            if len(part) >= 2:
+                segments.append(np.stack([part[:-1], part[1:]], axis=1))
+                owners.append(np.full(len(part) - 1, fid))
+    if len(segments) < 2:
+        return set()
+    seg, owner = np.concatenate(segments), np.concatenate(owners)
+    i, j = shapely.STRtree(shapely.linestrings(seg)).query(shapely.linestrings(seg), predicate="intersects")
+    keep = owner[i] < owner[j]
+    i, j = i[keep], j[keep]
+    p1, p2, q1, q2 = seg[i, 0], seg[i, 1], seg[j, 0], seg[j, 1]
+
+    def turn(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+        return np.sign((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+
+    proper = (turn(p1, p2, q1) * turn(p1, p2, q2) < 0) & (turn(q1, q2, p1) * turn(q1, q2, p2) < 0)
+    return {(int(a), int(b)) for a, b in zip(owner[i][proper], owner[j][proper], strict=True)}
 
 
 def zooms_to_check(renderer: Renderer, dataset: str) -> list[tuple[int, float]]:
