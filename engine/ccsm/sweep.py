@@ -22,7 +22,7 @@ CONTACT_SLACK = 1e-9
 
 
 @njit(cache=True, nogil=True)
-def _moments(c0, c1, c2, slack, roots):  # pragma: no cover - compiled
+def motion_moments(c0, c1, c2, slack, roots):  # pragma: no cover - compiled
     """Moments lam worth testing for c0 + c1 lam + c2 lam^2 = 0: both ends and the real roots; returns how many."""
     # The ends of the motion themselves: a contact exactly at lam = 0 or 1 is a contact too.
     roots[0] = 0.0
@@ -68,7 +68,7 @@ def _vertex_meets_segment(a, b, v, s, slack):  # pragma: no cover - compiled
     c1 = e0x * rvy - e0y * rvx + evx * r0y - evy * r0x
     c2 = evx * rvy - evy * rvx
     roots = np.empty(5)
-    n = _moments(c0, c1, c2, slack, roots)
+    n = motion_moments(c0, c1, c2, slack, roots)
     for k in range(n):
         lam = roots[k]
         if lam < 0.0 or lam > 1.0:

@@ -86,7 +86,13 @@ def crossing_pairs(lines: Sequence[Coords], only: set[int] | None = None, within
 
 def _piece_ranges(lines: Sequence[Coords], size: int) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]:
     """Pieces of at most ``size`` segments of the lines concatenated: first and last point, owner."""
-    sizes = np.array([len(line) for line in lines], dtype=np.intp)
+    return piece_ranges(np.array([len(line) for line in lines], dtype=np.intp), size)
+
+
+def piece_ranges(sizes: NDArray[np.integer], size: int) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]:
+    """Pieces of at most ``size`` segments of lines of ``sizes`` points, concatenated (lines of fewer than two
+    points have none): first and last point (neighbouring pieces share one), and the line."""
+    sizes = np.asarray(sizes, dtype=np.intp)
     offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
     usable = np.flatnonzero(sizes >= 2)
     n, off = sizes[usable], offsets[usable]

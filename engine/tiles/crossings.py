@@ -17,8 +17,9 @@ from numpy.typing import NDArray
 CELL_UNITS = 8
 
 
-@njit(cache=True, inline="always")
-def _orient(ax, ay, bx, by, cx, cy):  # pragma: no cover - compiled
+@njit(cache=True, nogil=True, inline="always")
+def orientation_sign(ax, ay, bx, by, cx, cy):  # pragma: no cover - compiled
+    """Sign of the turn a -> b -> c: 1 left, -1 right, 0 on one line (integer or float points)."""
     d = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
     return (d > 0) - (d < 0)
 
@@ -88,12 +89,12 @@ def _crossing_kernel(pts, seg_start, seg_owner, lo, size, first_only, found):  #
                 if seg_owner[members[u]] == seg_owner[members[v]]:
                     continue
                 b = seg_start[members[v]]
-                o1 = _orient(pts[a, 0], pts[a, 1], pts[a + 1, 0], pts[a + 1, 1], pts[b, 0], pts[b, 1])
-                o2 = _orient(pts[a, 0], pts[a, 1], pts[a + 1, 0], pts[a + 1, 1], pts[b + 1, 0], pts[b + 1, 1])
+                o1 = orientation_sign(pts[a, 0], pts[a, 1], pts[a + 1, 0], pts[a + 1, 1], pts[b, 0], pts[b, 1])
+                o2 = orientation_sign(pts[a, 0], pts[a, 1], pts[a + 1, 0], pts[a + 1, 1], pts[b + 1, 0], pts[b + 1, 1])
                 if o1 * o2 >= 0:
                     continue
-                o3 = _orient(pts[b, 0], pts[b, 1], pts[b + 1, 0], pts[b + 1, 1], pts[a, 0], pts[a, 1])
-                o4 = _orient(pts[b, 0], pts[b, 1], pts[b + 1, 0], pts[b + 1, 1], pts[a + 1, 0], pts[a + 1, 1])
+                o3 = orientation_sign(pts[b, 0], pts[b, 1], pts[b + 1, 0], pts[b + 1, 1], pts[a, 0], pts[a, 1])
+                o4 = orientation_sign(pts[b, 0], pts[b, 1], pts[b + 1, 0], pts[b + 1, 1], pts[a + 1, 0], pts[a + 1, 1])
                 if o3 * o4 < 0:
                     if n_found < len(found):
                         found[n_found, 0] = seg_owner[members[u]]

@@ -27,20 +27,15 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from engine.ccsm.sweep import motion_moments
+from engine.ccsm.topology import piece_ranges
+from engine.tiles.crossings import orientation_sign
+
 #: Segments per piece: the grid sees pieces, the compiled pass compares their segments pair by pair (4 was
 #: fastest on the sample's densest morph tile, against 2, 3, 5, 6 and 12).
 PIECE_SEGMENTS = 4
 #: Grid units per side of a cell of the grid of pieces: a few pieces per cell on the densest tiles.
 CELL_UNITS = 32.0
-#: Below this share of the largest coefficient the lam^2 term is dropped (the other root is far outside [0, 1]).
-LINEAR_SHARE = 1e-12
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _side(ax, ay, bx, by, cx, cy):  # pragma: no cover - compiled
-    """Sign of the turn a -> b -> c: 1 left, -1 right, 0 on one line."""
-    d = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
-    return (d > 0.0) - (d < 0.0)
 
 
 @njit(cache=True, nogil=True)
@@ -54,24 +49,21 @@ def _add_roots(a, d, s, v, roots, n):  # pragma: no cover - compiled
     c0 = e0x * r0y - e0y * r0x
     c1 = e0x * rvy - e0y * rvx + evx * r0y - evy * r0x
     c2 = evx * rvy - evy * rvx
-    big = max(abs(c0), abs(c1), abs(c2))
-    if big == 0.0:
-        return n  # always on the line: that side test never holds strictly, it splits nothing
-    if abs(c2) <= LINEAR_SHARE * big:
-        if c1 != 0.0 and 0.0 < -c0 / c1 < 1.0:
-            roots[n] = -c0 / c1
-            n += 1
-        return n
-    disc = c1 * c1 - 4.0 * c2 * c0
-    if disc < 0.0:
-        return n  # one sign all step long
-    sq = np.sqrt(disc)
-    q = -0.5 * (c1 + sq) if c1 >= 0.0 else -0.5 * (c1 - sq)  # the numerically stable pair of roots
-    for r in (q / c2, c0 / q if q != 0.0 else 0.0):
+    moments = np.empty(4)
+    # The roots of the repair's sweep (no slack: a double root is a touch, which splits nothing here).
+    for r in moments[: motion_moments(c0, c1, c2, 0.0, moments)]:
         if 0.0 < r < 1.0:
             roots[n] = r
             n += 1
     return n
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _cross_properly(p1x, p1y, p2x, p2y, q1x, q1y, q2x, q2y):  # pragma: no cover - compiled
+    """Do segments p1-p2 and q1-q2 cross at a point inside both?"""
+    if orientation_sign(p1x, p1y, p2x, p2y, q1x, q1y) * orientation_sign(p1x, p1y, p2x, p2y, q2x, q2y) >= 0:
+        return False
+    return orientation_sign(q1x, q1y, q2x, q2y, p1x, p1y) * orientation_sign(q1x, q1y, q2x, q2y, p2x, p2y) < 0
 
 
 @njit(cache=True, nogil=True)
@@ -81,9 +73,7 @@ def _cross_properly_at(a, d, s, t, lam):  # pragma: no cover - compiled
     p2x, p2y = a[s + 1, 0] + lam * d[s + 1, 0], a[s + 1, 1] + lam * d[s + 1, 1]
     q1x, q1y = a[t, 0] + lam * d[t, 0], a[t, 1] + lam * d[t, 1]
     q2x, q2y = a[t + 1, 0] + lam * d[t + 1, 0], a[t + 1, 1] + lam * d[t + 1, 1]
-    if _side(p1x, p1y, p2x, p2y, q1x, q1y) * _side(p1x, p1y, p2x, p2y, q2x, q2y) >= 0:
-        return False
-    return _side(q1x, q1y, q2x, q2y, p1x, p1y) * _side(q1x, q1y, q2x, q2y, p2x, p2y) < 0
+    return _cross_properly(p1x, p1y, p2x, p2y, q1x, q1y, q2x, q2y)
 
 
 @njit(cache=True, nogil=True)
@@ -119,11 +109,7 @@ def _segments_dist(a, s, t):  # pragma: no cover - compiled
     """Distance between segments (s, s + 1) and (t, t + 1) of points ``a``; 0 when they meet."""
     p1x, p1y, p2x, p2y = a[s, 0], a[s, 1], a[s + 1, 0], a[s + 1, 1]
     q1x, q1y, q2x, q2y = a[t, 0], a[t, 1], a[t + 1, 0], a[t + 1, 1]
-    o1 = _side(p1x, p1y, p2x, p2y, q1x, q1y)
-    o2 = _side(p1x, p1y, p2x, p2y, q2x, q2y)
-    o3 = _side(q1x, q1y, q2x, q2y, p1x, p1y)
-    o4 = _side(q1x, q1y, q2x, q2y, p2x, p2y)
-    if o1 * o2 < 0 and o3 * o4 < 0:
+    if _cross_properly(p1x, p1y, p2x, p2y, q1x, q1y, q2x, q2y):
         return 0.0
     d = min(
         _point_segment_dist2(q1x, q1y, p1x, p1y, p2x, p2y),
@@ -200,9 +186,9 @@ def _pieces_cross(pos, steps_d, lo, hi, reach, p0, p1, q0, q1, roots):  # pragma
 
 
 @njit(cache=True, nogil=True)
-def _crossing_pieces(pos, first, last, boxes, owner, skip, found):  # noqa: C901  # pragma: no cover - compiled
-    """Pieces of different contours that cross properly at some moment of the level: their owners go to
-    ``found`` rows while there is room; returns how many pairs of pieces cross.
+def _crossing_pieces(pos, first, last, boxes, owner, skip):  # noqa: C901  # pragma: no cover - compiled
+    """Pieces of different contours that cross properly at some moment of the level: (M, 2) their owners, a row
+    per pair of pieces.
 
     Pieces go into the cells of a uniform grid their boxes over the level cover; two pieces are compared in
     one cell only, the one holding the lower-left corner of where their boxes overlap.
@@ -236,6 +222,7 @@ def _crossing_pieces(pos, first, last, boxes, owner, skip, found):  # noqa: C901
                 members[fill[cy * nx + cx]] = i
                 fill[cy * nx + cx] += 1
     roots = np.empty(10)
+    found = np.empty((64, 2), np.int64)
     n_found = 0
     for c in range(nx * ny):
         for u in range(offsets[c], offsets[c + 1]):
@@ -250,11 +237,12 @@ def _crossing_pieces(pos, first, last, boxes, owner, skip, found):  # noqa: C901
                 if max(cy0[i], cy0[j]) * nx + max(cx0[i], cx0[j]) != c:
                     continue  # compared in another cell
                 if _pieces_cross(pos, steps_d, lo, hi, reach, first[i], last[i], first[j], last[j], roots):
-                    if n_found < len(found):
-                        found[n_found, 0] = owner[i]
-                        found[n_found, 1] = owner[j]
+                    if n_found == len(found):
+                        found = np.concatenate((found, np.empty_like(found)))
+                    found[n_found, 0] = owner[i]
+                    found[n_found, 1] = owner[j]
                     n_found += 1
-    return n_found
+    return found[:n_found]
 
 
 @njit(cache=True, nogil=True)
@@ -282,20 +270,6 @@ def _piece_boxes(pos, first, last):  # pragma: no cover - compiled
                     boxes[i, c] = min(boxes[i, c], pos[k, v, c])
                     boxes[i, 2 + c] = max(boxes[i, 2 + c], pos[k, v, c])
     return boxes
-
-
-def _pieces(part_len: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
-    """Pieces of at most PIECE_SEGMENTS segments of each part of two points or more: first and last point
-    (neighbouring pieces share one), and the part."""
-    starts = np.cumsum(part_len) - part_len
-    usable = np.flatnonzero(part_len >= 2)
-    segments = part_len[usable] - 1
-    per_part = (segments - 1) // PIECE_SEGMENTS + 1
-    part = np.repeat(usable, per_part)
-    k = np.arange(per_part.sum()) - np.repeat(np.cumsum(per_part) - per_part, per_part)
-    first = starts[part] + k * PIECE_SEGMENTS
-    last = np.minimum(first + PIECE_SEGMENTS, starts[part] + part_len[part] - 1)
-    return first.astype(np.int64), last.astype(np.int64), part.astype(np.int64)
 
 
 def morph_crossing_pairs(
@@ -328,7 +302,7 @@ def morph_crossing_pairs(
     >>> morph_crossing_pairs(np.vstack([a, b0]), np.vstack([a, b1]), *parts, w)
     {(0, 1)}
     """
-    first, last, piece_part = _pieces(np.asarray(part_len, dtype=np.int64))
+    first, last, piece_part = (a.astype(np.int64) for a in piece_ranges(part_len, PIECE_SEGMENTS))
     if len(first) < 2:
         return set()
     point_owner = np.repeat(np.asarray(part_owner, dtype=np.int64), part_len)
@@ -339,10 +313,5 @@ def morph_crossing_pairs(
     boxes = _piece_boxes(pos, first, last)
     owner = np.asarray(part_owner, dtype=np.int64)[piece_part]
     held = np.zeros(w.shape[1], dtype=np.bool_) if skip is None else np.asarray(skip, dtype=np.bool_)
-    found = np.zeros((64, 2), dtype=np.int64)
-    n = _crossing_pieces(pos, first, last, boxes, owner, held, found)
-    if n > len(found):  # more than the first guess: run again with room for all
-        found = np.zeros((n, 2), dtype=np.int64)
-        _crossing_pieces(pos, first, last, boxes, owner, held, found)
-    pairs = np.sort(found[:n], axis=1)
+    pairs = np.sort(_crossing_pieces(pos, first, last, boxes, owner, held), axis=1)
     return {(int(a), int(b)) for a, b in pairs.tolist()}
