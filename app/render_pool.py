@@ -208,6 +208,9 @@ class RenderPool:
             raise RenderUnavailable(
                 f"the render worker stopped while drawing this; try again in {RETRY_AFTER_S} s"
             ) from None
+        except BaseException:  # anything else (an answer that does not unpickle): the worker's state is unknown
+            self._replace(worker)
+            raise
         worker.busy_since = None
         self._idle.put_nowait(worker)
         if status == "ok":
