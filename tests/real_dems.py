@@ -17,7 +17,7 @@ import numpy as np
 from matplotlib import cbook
 from synthetic_rasters import write_exact_level_lines
 
-from engine.io.dem import read_dem
+from engine.io.dem import pixel_centres_to_crs, read_dem
 
 MAUNGA_WHAU_ASC = Path(__file__).parent / "data" / "maunga_whau_nztm.asc"
 
@@ -30,11 +30,9 @@ TOPOBATHY_WINDOW = (slice(60, 80), slice(80, 100))
 def write_maunga_whau_contours(path: Path, interval: float) -> Path:
     """Maunga Whau's whole-metre heights contoured at multiples of ``interval``, in NZTM (EPSG:2193)."""
     grid = read_dem(MAUNGA_WHAU_ASC)
-    a, b, c, d, e, f = grid.transform
 
-    def nztm(pts: np.ndarray) -> np.ndarray:  # contour points are at pixel centres: index + 0.5 on the edges
-        u, v = pts[:, 0] + 0.5, pts[:, 1] + 0.5
-        return np.column_stack([a * u + b * v + c, d * u + e * v + f])
+    def nztm(pts: np.ndarray) -> np.ndarray:
+        return pixel_centres_to_crs(pts, grid.transform)
 
     return write_exact_level_lines(path, np.asarray(grid.z.filled()), interval, nztm, crs="EPSG:2193")
 

@@ -334,9 +334,7 @@ def line_parts_from_traced(
         elevations.extend([level] * len(lines))
     uv, counts_all, ids, elevations, bad = _drop_node_artefacts(uv, counts_all, ids, elevations, where)
     uv, counts_all = _close_touching_rings(uv, counts_all)
-    uv = uv + 0.5  # pixel centres sit half a pixel inside the pixel edges
-    a, b, c, d, e, f = transform
-    xy = np.column_stack([a * uv[:, 0] + b * uv[:, 1] + c, d * uv[:, 0] + e * uv[:, 1] + f])
+    xy = pixel_centres_to_crs(uv, transform)
     return LineParts(
         xy=xy,
         offsets=np.concatenate([[0], np.cumsum(counts_all)]).astype(np.int64),
@@ -344,6 +342,16 @@ def line_parts_from_traced(
         elevations=np.asarray(elevations, dtype=np.float64),
         bad=bad,
     )
+
+
+def pixel_centres_to_crs(
+    uv: NDArray[np.float64], transform: tuple[float, float, float, float, float, float]
+) -> NDArray[np.float64]:
+    """(N, 2) points given in pixel-centre grid units (column, row: node (r, k) at (k, r)) placed in the grid's
+    CRS by its geotransform (:class:`DemGrid`); pixel centres sit half a pixel inside the pixel edges."""
+    u, v = uv[:, 0] + 0.5, uv[:, 1] + 0.5
+    a, b, c, d, e, f = transform
+    return np.column_stack([a * u + b * v + c, d * u + e * v + f])
 
 
 def _drop_node_artefacts(
