@@ -17,7 +17,7 @@ from threadpoolctl import threadpool_limits
 
 from engine.ccsm.ccs import CCS, build_ccs, check_contour, slice_area
 from engine.ccsm.regression import ScaleModel, fit_scale_model
-from engine.ccsm.topology import INPUT_TOUCH_M, crossing_pairs, find_new_crossings
+from engine.ccsm.topology import InputTouches, find_new_crossings
 from engine.errors import CCSMError
 from engine.parallel import local_pool
 from engine.params import BuildParams
@@ -228,7 +228,7 @@ def resolve_crossings(
     before, and that neighbour then gets the same treatment.
     """
     steps = checked_ladder_steps(model)
-    allowed = crossing_pairs([s.at(0.0) for _, s in pairs], within=INPUT_TOUCH_M)
+    allowed = InputTouches([s.at(0.0) for _, s in pairs])
     changed: set[int] = set()
     involved = find_new_crossings([s for _, s in pairs], model.ladder, steps, allowed)
     round_ = 0
