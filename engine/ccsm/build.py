@@ -9,17 +9,17 @@ import math
 import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor
-from contextlib import nullcontext
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from engine.ccsm.blocks import find_crossings_by_block
 from engine.ccsm.ccs import CCS, build_ccs, check_contour, slice_area
 from engine.ccsm.regression import ScaleModel, fit_scale_model
-from engine.ccsm.topology import InputTouches, find_new_crossings
 from engine.errors import CCSMError
-from engine.parallel import local_pool
+from engine.parallel import local_pool, map_ordered
 from engine.params import BuildParams
 from engine.tolerances import MIN_VISIBLE_RING_SIDE_M, min_ring_area_for_scale
 from engine.types import BadFeature, Contour, ContourSet
@@ -102,6 +102,15 @@ def _build_chunk(
     return out
 
 
+def _pool(executor: Executor | None, workers: int, chunks: int) -> AbstractContextManager[Executor | None]:
+    """Where a build's tasks run: the given executor, a local pool of ``workers``, or this process (None)."""
+    if executor is not None:
+        return nullcontext(executor)
+    if workers == 1 or chunks <= 1:
+        return nullcontext(None)
+    return local_pool(workers)
+
+
 def default_workers() -> int:
     """Worker processes: one per core the process may use."""
     try:
@@ -160,28 +169,23 @@ def build_contour_set(
     total = len(contours)  # contours that passed the check; the rejected ones are reported, not built
     if progress:
         progress(0, total)
-    if executor is None and (workers == 1 or len(chunks) <= 1):
-        with threadpool_limits(1):  # small banded solves: BLAS threads only spin
-            for chunk, chunk_labels in chunks:
-                results.extend(_build_chunk(chunk, chunk_labels, params, model))
-                done += len(chunk)
-                if progress:
-                    progress(done, total)
-    else:
-        # One BLAS thread per worker: OpenBLAS's own threads would fight the worker processes for the cores.
-        # A given executor (a Dask cluster) runs the very same chunks; it is the caller's to shut down.
-        with nullcontext(executor) if executor is not None else local_pool(workers) as pool:
-            futures = [pool.submit(_build_chunk, chunk, lab, params, model) for chunk, lab in chunks]
-            for fut, (chunk, _) in zip(futures, chunks, strict=True):
-                results.extend(fut.result())
-                done += len(chunk)
-                if progress:
-                    progress(done, total)
-    built_pairs = [(c, r) for c, r in zip(contours, results, strict=True) if isinstance(r, CCS)]
-    repaired = 0
-    if params.resolve_crossings and params.target_mode == "scale" and built_pairs:
-        with threadpool_limits(1):
-            repaired = resolve_crossings(built_pairs, labels_of(contours, labels, built_pairs), params, model)
+    # One BLAS thread per worker: OpenBLAS's own threads would fight the worker processes for the cores.
+    # A given executor (a Dask cluster) runs the very same chunks and repair tasks; it is the caller's to shut
+    # down. The local pool stays open through the crossing repair, whose checks and rebuilds it runs too.
+    with _pool(executor, workers, len(chunks)) as pool:
+        for chunk_results, (chunk, _) in zip(
+            map_ordered(pool, _build_chunk, [(c, lab, params, model) for c, lab in chunks]), chunks, strict=True
+        ):
+            results.extend(chunk_results)
+            done += len(chunk)
+            if progress:
+                progress(done, total)
+        built_pairs = [(c, r) for c, r in zip(contours, results, strict=True) if isinstance(r, CCS)]
+        repaired = 0
+        if params.resolve_crossings and params.target_mode == "scale" and built_pairs:
+            with threadpool_limits(1):
+                labels_built = labels_of(contours, labels, built_pairs)
+                repaired = resolve_crossings(built_pairs, labels_built, params, model, pool)
     surfaces = [r for _, r in built_pairs]
     bad = list(contour_set.bad_features) + rejected + [r for r in results if isinstance(r, BadFeature)]
     return BuiltSet(
@@ -196,6 +200,9 @@ def build_contour_set(
         repaired=repaired,
     )
 
+
+#: Contours per rebuild task of the crossing repair: a round rebuilds a few hundred at most.
+REPAIR_CHUNK = 16
 
 #: Rounds of crossing repair; each halves the target tolerance of the contours involved, the last keeps L0
 #: (Ln = L0: the contour no longer moves, so two such contours are as apart as in the input).
@@ -217,7 +224,11 @@ def checked_ladder_steps(model: ScaleModel) -> list[int]:
 
 
 def resolve_crossings(
-    pairs: list[tuple[Contour, CCS]], labels: Sequence[int], params: BuildParams, model: ScaleModel
+    pairs: list[tuple[Contour, CCS]],
+    labels: Sequence[int],
+    params: BuildParams,
+    model: ScaleModel,
+    executor: Executor | None = None,
 ) -> int:
     """Rebuild, with finer targets, the contours whose slices meet a neighbour at some scale; returns how
     many changed.
@@ -226,34 +237,59 @@ def resolve_crossings(
     them and must not be blamed for them. Rounds go on until no new contact is left: a contour rebuilt in
     the last round (Ln = L0, it no longer moves) can still be met by a neighbour that was not involved
     before, and that neighbour then gets the same treatment.
+
+    The check runs block by block (:mod:`engine.ccsm.blocks`: each block's contours against those that can
+    reach them, the same pairs as a check of the whole set) and the rebuilds in chunks, both on ``executor``
+    when given (a local pool or a Dask cluster), else in this process.
     """
     steps = checked_ladder_steps(model)
-    allowed = InputTouches([s.at(0.0) for _, s in pairs])
     changed: set[int] = set()
-    involved = find_new_crossings([s for _, s in pairs], model.ladder, steps, allowed)
+    involved = find_crossings_by_block([s for _, s in pairs], model.ladder, steps, None, executor)
     round_ = 0
     while involved:
         factor = REPAIR_FACTORS[min(round_, len(REPAIR_FACTORS) - 1)]
         round_ += 1
-        rebuilt_now: set[int] = set()
+        todo = []
         for i in sorted(involved):
-            contour, old = pairs[i]
             # Never coarser than before, and at least one step finer than its last build.
-            new_factor = min(factor, _next_factor(old.tolerance_factor))
-            if old.tolerance_factor <= new_factor:
-                continue
-            rebuilt = _build_chunk([contour], [labels[i]], params, model, [new_factor])[0]
+            new_factor = min(factor, _next_factor(pairs[i][1].tolerance_factor))
+            if pairs[i][1].tolerance_factor > new_factor:
+                todo.append((i, new_factor))
+        rebuilt_now: set[int] = set()
+        for (i, _), rebuilt in zip(todo, _rebuild(pairs, labels, todo, params, model, executor), strict=True):
             if isinstance(rebuilt, CCS):
-                pairs[i] = (contour, rebuilt)
+                pairs[i] = (pairs[i][0], rebuilt)
                 changed.add(i)
                 rebuilt_now.add(i)
         # Only the rebuilt contours can have made new crossings (or still have old ones).
         involved = (
-            find_new_crossings([s for _, s in pairs], model.ladder, steps, allowed, rebuilt_now)
+            find_crossings_by_block([s for _, s in pairs], model.ladder, steps, rebuilt_now, executor)
             if rebuilt_now
             else set()
         )
     return len(changed)
+
+
+def _rebuild(
+    pairs: Sequence[tuple[Contour, CCS]],
+    labels: Sequence[int],
+    todo: Sequence[tuple[int, float]],
+    params: BuildParams,
+    model: ScaleModel,
+    executor: Executor | None,
+) -> list[CCS | BadFeature]:
+    """Rebuild contours ``todo`` = (index, tolerance factor), in chunks on ``executor``; results in order."""
+    tasks = [
+        (
+            [pairs[i][0] for i, _ in todo[k : k + REPAIR_CHUNK]],
+            [labels[i] for i, _ in todo[k : k + REPAIR_CHUNK]],
+            params,
+            model,
+            [f for _, f in todo[k : k + REPAIR_CHUNK]],
+        )
+        for k in range(0, len(todo), REPAIR_CHUNK)
+    ]
+    return [r for chunk in map_ordered(executor, _build_chunk, tasks) for r in chunk]
 
 
 def _next_factor(factor: float) -> float:

@@ -123,6 +123,10 @@ class SweepIndex:
         (P,) first and last point of each piece, and its line.
     p, q
         (K,) candidate pairs of pieces, each pair once.
+    gap
+        (K,) distance between the two pieces of each pair at t = 0 (metres).
+    reach
+        (P,) the largest distance a vertex of each piece moves from t = 0 to t = 1 (metres).
     """
 
     base: NDArray[np.float64]
@@ -133,6 +137,8 @@ class SweepIndex:
     owner: NDArray[np.intp]
     p: NDArray[np.intp]
     q: NDArray[np.intp]
+    gap: NDArray[np.float64]
+    reach: NDArray[np.float64]
 
     @classmethod
     def of(cls, bases: Sequence[Coords], tops: Sequence[Coords], only: set[int] | None = None) -> SweepIndex:
@@ -144,8 +150,7 @@ class SweepIndex:
         top = _stacked(tops)
         line_of_point = np.repeat(np.arange(len(bases)), sizes).astype(np.intp)
         if len(first) == 0:
-            empty = np.zeros(0, dtype=np.intp)
-            return cls(base, top, line_of_point, first, last, owner, empty, empty)
+            return cls.empty()
         # Every slice of a piece, at any t, stays inside the box of its rows at t = 0 and t = 1.
         lo = _per_piece(np.minimum, np.minimum(base, top), first, last)
         hi = _per_piece(np.maximum, np.maximum(base, top), first, last)
@@ -157,10 +162,9 @@ class SweepIndex:
         keep = owner[p] < owner[q]
         if only is not None:
             keep |= (owner[p] != owner[q]) & ~np.isin(owner[q], list(only))
-        p, q = _close_enough(base, top, first, last, p[keep], q[keep])
+        p, q, gap, reach = _close_enough(base, top, first, last, p[keep], q[keep])
         if not len(p):
-            empty = np.zeros(0, dtype=np.intp)
-            return cls(base[:0], top[:0], empty, empty, empty, empty, empty, empty)
+            return cls.empty()
         # Keep only the points of pieces in some pair: each step then moves and boxes just those.
         used, pair_index = np.unique(np.concatenate([p, q]), return_inverse=True)
         point, counts = _points_of(first[used], last[used])
@@ -174,7 +178,15 @@ class SweepIndex:
             owner[used],
             pair_index[: len(p)].astype(np.intp),
             pair_index[len(p) :].astype(np.intp),
+            gap,
+            reach[used],
         )
+
+    @classmethod
+    def empty(cls) -> SweepIndex:
+        """An index with no pairs."""
+        none, points = np.zeros(0, dtype=np.intp), np.zeros((0, 2))
+        return cls(points, points, none, none, none, none, none, none, np.zeros(0), np.zeros(0))
 
     def contacts(
         self, t0: NDArray[np.float64], t1: NDArray[np.float64], shown: NDArray[np.bool_] | None = None
@@ -185,11 +197,14 @@ class SweepIndex:
         tp1 = t1[self.line_of_point][:, None]
         a = self.base + tp0 * (self.top - self.base)
         b = self.base + tp1 * (self.top - self.base)
-        p, q = self.p, self.q
+        # A slice at t is within t * reach of the base row; pieces farther apart at t = 0 than that, over
+        # this motion, cannot meet in it (at small t, most pairs end here).
+        t_most = np.maximum(np.abs(t0), np.abs(t1))[self.owner]
+        keep = self.gap <= t_most[self.p] * self.reach[self.p] + t_most[self.q] * self.reach[self.q] + INPUT_TOUCH_M
         if shown is not None:
-            both = shown[self.owner[p]] & shown[self.owner[q]]
-            p, q = p[both], q[both]
-        # Pieces whose boxes over this motion miss each other cannot meet: most pairs end here.
+            keep &= shown[self.owner[self.p]] & shown[self.owner[self.q]]
+        p, q = self.p[keep], self.q[keep]
+        # Pieces whose boxes over this motion miss each other cannot meet either.
         lo = _per_piece(np.minimum, np.minimum(a, b), self.first, self.last)
         hi = _per_piece(np.maximum, np.maximum(a, b), self.first, self.last)
         near = np.all((lo[p] <= hi[q]) & (lo[q] <= hi[p]), axis=1)
@@ -236,8 +251,9 @@ def _close_enough(
     last: NDArray[np.intp],
     p: NDArray[np.intp],
     q: NDArray[np.intp],
-) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]:
     """The pairs of pieces (p, q) that may ever meet: those no farther apart at t = 0 than their vertices move.
+    Returns them with their distance at t = 0, and every piece's reach (its vertices' largest move).
 
     Every vertex of a slice lies within ``|top - base|`` of its base point, so every point of a slice's
     segment lies within the larger move of the segment's ends of the base segment's matching point: two
@@ -245,7 +261,7 @@ def _close_enough(
     t. On the sample this drops about 70% of the pairs whose boxes overlap, before any step is swept.
     """
     if not len(p):
-        return p, q
+        return p, q, np.zeros(0), np.zeros(len(first))
     pieces = np.unique(np.concatenate([p, q]))
     point, counts = _points_of(first[pieces], last[pieces])
     geoms = np.empty(len(first), dtype=object)
@@ -253,8 +269,9 @@ def _close_enough(
     move = np.linalg.norm(top - base, axis=1)
     reach = _per_piece(np.maximum, move[:, None], first, last)[:, 0]
     # INPUT_TOUCH_M of slack: a pair exactly at the limit is kept, whatever the rounding of the distance.
-    near = shapely.distance(geoms[p], geoms[q]) <= reach[p] + reach[q] + INPUT_TOUCH_M
-    return p[near], q[near]
+    gap = shapely.distance(geoms[p], geoms[q])
+    near = gap <= reach[p] + reach[q] + INPUT_TOUCH_M
+    return p[near], q[near], gap[near], reach
 
 
 def _stacked(lines: Sequence[Coords]) -> NDArray[np.float64]:

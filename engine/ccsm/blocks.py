@@ -1,0 +1,145 @@
+"""Spatial blocks for the crossing repair: each block's contours are checked against the contours that can reach
+them, not against the whole set (docs/design.md section 4.8, issue 12 item 2).
+
+A contour belongs to the block of a square grid over the set that holds its box centre; its box is the box of
+its base and top rows, which holds every slice at every t. A block's *near* contours are its own and every
+contour whose box overlaps one of theirs: the only contours whose slices can meet its own. Checking each block's
+own contours against its near ones therefore finds exactly the meeting pairs a check of the whole set finds
+(each pair at least once, from the block of either contour), so the repair's decisions do not change. Each
+block's check needs only its near contours' rows: blocks are checked apart from each other, on any executor.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from concurrent.futures import Executor
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import shapely
+from numpy.typing import NDArray
+
+from engine.ccsm.topology import InputTouches, find_new_crossings
+from engine.parallel import map_ordered
+
+if TYPE_CHECKING:
+    from engine.ccsm.ccs import CCS
+
+#: Contours per block on average: enough that a block's index is worth building, few enough that a block and
+#: its near contours are a small share of a large set (memory) and the blocks spread over the workers.
+BLOCK_CONTOURS = 256
+
+
+@dataclass(frozen=True)
+class Block:
+    """One cell of the grid.
+
+    Attributes
+    ----------
+    own
+        (k,) indices of the contours whose box centre lies in the cell.
+    near
+        (m,) sorted indices of ``own`` and of every contour whose box overlaps the box of one of them.
+    """
+
+    own: NDArray[np.intp]
+    near: NDArray[np.intp]
+
+
+def surface_boxes(surfaces: Sequence[CCS]) -> NDArray[np.float64]:
+    """(n, 4) box (minx, miny, maxx, maxy), metres, of each surface's base and top rows: every slice lies inside."""
+    out = np.empty((len(surfaces), 4))
+    for i, s in enumerate(surfaces):
+        both = np.concatenate([s.base, s.top])
+        out[i, :2] = both.min(axis=0)
+        out[i, 2:] = both.max(axis=0)
+    return out
+
+
+def spatial_blocks(
+    boxes: NDArray[np.float64], only: NDArray[np.intp] | None = None, per_block: int = BLOCK_CONTOURS
+) -> list[Block]:
+    """The blocks of a grid over the boxes' centres, in row-major order; empty cells are left out.
+
+    Parameters
+    ----------
+    boxes
+        (n, 4) contour boxes (:func:`surface_boxes`).
+    only
+        If given, a block owns only these contours (the ones to check); all contours still count as near.
+    per_block
+        Contours per block on average (the grid has about n / per_block cells).
+
+    >>> boxes = np.array([[0, 0, 1, 1], [0.5, 0.5, 2, 2], [9, 9, 10, 10]], dtype=float)
+    >>> [(b.own.tolist(), b.near.tolist()) for b in spatial_blocks(boxes, per_block=1)]
+    [([0, 1], [0, 1]), ([2], [2])]
+    """
+    n = len(boxes)
+    owned = np.arange(n, dtype=np.intp) if only is None else np.asarray(only, dtype=np.intp)
+    if n == 0 or len(owned) == 0:
+        return []
+    side = max(1, math.ceil(math.sqrt(n / max(1, per_block))))
+    centres = (boxes[:, :2] + boxes[:, 2:]) / 2
+    lo = centres.min(axis=0)
+    span = np.maximum(centres.max(axis=0) - lo, 1e-9)
+    cell = np.minimum((((centres[owned] - lo) / span) * side).astype(np.intp), side - 1)
+    key = cell[:, 1] * side + cell[:, 0]
+    order = np.argsort(key, kind="stable")
+    tree = shapely.STRtree(shapely.box(boxes[:, 0], boxes[:, 1], boxes[:, 2], boxes[:, 3]))
+    blocks = []
+    for group in np.split(owned[order], np.flatnonzero(np.diff(key[order])) + 1):
+        own = np.sort(group)
+        _, hits = tree.query(shapely.box(*boxes[own].T))
+        blocks.append(Block(own=own, near=np.union1d(own, hits).astype(np.intp)))
+    return blocks
+
+
+def block_crossings(
+    near: Sequence[CCS],
+    own: Sequence[int],
+    ladder: NDArray[np.float64],
+    steps: Sequence[int],
+) -> set[int]:
+    """Local indices (into ``near``) of the surfaces in a new contact with an ``own`` one at some checked step.
+
+    Pairs already meeting in the input are left out (:class:`~engine.ccsm.topology.InputTouches`).
+    """
+    allowed = InputTouches([s.at(0.0) for s in near])
+    return find_new_crossings(near, ladder, steps, allowed, set(own))
+
+
+def find_crossings_by_block(
+    surfaces: Sequence[CCS],
+    ladder: NDArray[np.float64],
+    steps: Sequence[int],
+    only: set[int] | None = None,
+    executor: Executor | None = None,
+    per_block: int | None = None,
+) -> set[int]:
+    """Indices of the surfaces in a new contact (with one of ``only``, if given), found block by block:
+    the same answer as :func:`~engine.ccsm.topology.find_new_crossings` over the whole set with the input's
+    touches allowed, with an index per block instead of one over everything.
+
+    Parameters
+    ----------
+    surfaces, ladder, steps
+        As for :func:`~engine.ccsm.topology.find_new_crossings`.
+    only
+        Restrict the search to contacts that involve these surfaces (the ones just rebuilt).
+    executor
+        Where the blocks are checked (a local pool or a Dask cluster); None = this process.
+    per_block
+        Contours per block on average; None = :data:`BLOCK_CONTOURS`.
+    """
+    boxes = surface_boxes(surfaces)
+    checked = None if only is None else np.array(sorted(only), dtype=np.intp)
+    blocks = spatial_blocks(boxes, checked, BLOCK_CONTOURS if per_block is None else per_block)
+    tasks = [
+        ([surfaces[i] for i in b.near], np.searchsorted(b.near, b.own).tolist(), ladder, list(steps)) for b in blocks
+    ]
+    found: set[int] = set()
+    for block, local in zip(blocks, map_ordered(executor, block_crossings, tasks), strict=True):
+        found.update(int(block.near[i]) for i in local)
+    return found
