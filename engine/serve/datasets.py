@@ -26,7 +26,7 @@ from engine.io.dem import DEM_SUFFIXES
 from engine.io.source import read_source
 from engine.params import BuildParams
 from engine.serve.records import contour_rows, dataset_meta
-from engine.store.sqlite import STORE_FORMAT, CCSStore, DatasetInfo
+from engine.store.sqlite import STORE_FORMAT, CCSStore, DatasetInfo, NewContour
 from engine.types import Contour, ContourSet
 
 Progress = Callable[[int, int], None]
@@ -229,11 +229,29 @@ def save_built(
     build_seconds: float = 0.0,
     only_if_building: bool = False,
 ) -> DatasetInfo:
-    """Write a built set (``contours``: the input contours it was built from) as one dataset version."""
+    """Write a built set (``contours``: the input contours it was built from) as one dataset version.
+
+    Rows are made and written batch by batch (:data:`SAVE_BATCH` contours) inside the store's one write
+    transaction, so the reprojected rows of only one batch are in memory at a time.
+    """
     meta = dataset_meta(
         built, name=name, source=source, source_hash=digest, params=params, build_seconds=build_seconds
     )
-    return store.save(dataset, meta, contour_rows(built, contours), only_if_building=only_if_building)
+    return store.save(dataset, meta, _rows_in_batches(built, contours), only_if_building=only_if_building)
+
+
+#: Contours whose store rows are made at once while a built set is written.
+SAVE_BATCH = 512
+
+
+def _rows_in_batches(built: BuiltSet, contours: Sequence[Contour]) -> Iterator[NewContour]:
+    """The store rows of ``built``, made :data:`SAVE_BATCH` surfaces at a time."""
+    by_key = {(c.id, float(c.elevation), c.n_vertices): c for c in contours}
+    for start in range(0, len(built.surfaces), SAVE_BATCH):
+        batch = built.surfaces[start : start + SAVE_BATCH]
+        keys = ((s.contour_id, float(s.elevation), int(s.n_input_vertices)) for s in batch)
+        inputs = [by_key[k] for k in keys if k in by_key]
+        yield from contour_rows(replace(built, surfaces=batch), inputs)
 
 
 def build_dataset(
