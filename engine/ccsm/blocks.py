@@ -12,17 +12,19 @@ block's check needs only its near contours' rows: blocks are checked apart from 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from concurrent.futures import Executor
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import shapely
 from numpy.typing import NDArray
 
-from engine.ccsm.topology import InputTouches, find_new_crossings
+from engine.ccsm.spool import Spool
+from engine.ccsm.topology import InputTouches, new_contact_pairs
 from engine.parallel import map_ordered
+from engine.types import Coords
 
 if TYPE_CHECKING:
     from engine.ccsm.ccs import CCS
@@ -97,27 +99,73 @@ def spatial_blocks(
     return blocks
 
 
-def block_crossings(
-    near: Sequence[CCS],
-    own: Sequence[int],
-    ladder: NDArray[np.float64],
-    steps: Sequence[int],
-) -> set[int]:
-    """Local indices (into ``near``) of the surfaces in a new contact with an ``own`` one at some checked step.
+def cut_to_region(surface: CCS, region: NDArray[np.float64]) -> CCS | None:
+    """The stretch of ``surface`` whose segments can reach ``region`` (minx, miny, maxx, maxy), or None.
 
-    Pairs already meeting in the input are left out (:class:`~engine.ccsm.topology.InputTouches`).
+    A segment's slices at every t lie in the box of its ends' rows at t = 0 and t = 1, so a segment whose box
+    misses the region can meet nothing inside it. The rows from the first to the last segment that reaches the
+    region are kept (one stretch, so the vertices' motion is unchanged): a contour that runs through many
+    blocks is then checked in each for about its length there, not for its whole length.
     """
-    allowed = InputTouches([s.at(0.0) for s in near])
-    return find_new_crossings(near, ladder, steps, allowed, set(own))
+    rows = np.concatenate([surface.base[:, None], surface.top[:, None]], axis=1)  # (M, 2 rows, 2)
+    lo, hi = rows.min(axis=1), rows.max(axis=1)
+    seg_lo, seg_hi = np.minimum(lo[:-1], lo[1:]), np.maximum(hi[:-1], hi[1:])
+    reach = np.flatnonzero(np.all((seg_lo <= region[2:]) & (seg_hi >= region[:2]), axis=1))
+    if not len(reach):
+        return None
+    first, last = int(reach[0]), int(reach[-1]) + 2
+    if first == 0 and last == len(rows):
+        return surface
+    return replace(surface, base=surface.base[first:last], top=surface.top[first:last])
+
+
+def block_contacts(
+    near: Sequence[CCS | None], own: Sequence[int], ladder: NDArray[np.float64], steps: Sequence[int]
+) -> set[tuple[int, int]]:
+    """Pairs (i, j), i < j, of local indices (into ``near``) whose slices meet at some checked step, each with
+    an ``own`` surface in it; None stands for a surface that cannot reach the block (so it meets nothing)."""
+    kept = [i for i, s in enumerate(near) if s is not None]
+    position = {i: k for k, i in enumerate(kept)}
+    found = new_contact_pairs([near[i] for i in kept], ladder, steps, {position[i] for i in own})  # type: ignore[misc]
+    return {(kept[a], kept[b]) for a, b in found}
+
+
+def input_touches(spool: Spool) -> InputTouches:
+    """The input's touching pairs of a spool's surfaces (their base rows), asked pair by pair."""
+    return InputTouches(_SpoolBases(spool))  # type: ignore[arg-type]
+
+
+class _SpoolBases:
+    """The base rows of a spool's surfaces, read when asked: the input lines for :class:`InputTouches`."""
+
+    def __init__(self, spool: Spool) -> None:
+        self.spool = spool
+
+    def __getitem__(self, index: int) -> Coords:
+        return self.spool.get([index])[0].base
+
+
+def _block_tasks(
+    blocks: Sequence[Block], spool: Spool, boxes: NDArray[np.float64], ladder: NDArray[np.float64], steps: list[int]
+) -> Iterator[tuple[Any, ...]]:
+    """One task per block, each block's surfaces read from the spool only when its task is sent."""
+    for b in blocks:
+        region = np.concatenate([boxes[b.own, :2].min(axis=0), boxes[b.own, 2:].max(axis=0)])
+        own = set(b.own.tolist())
+        indices = b.near.tolist()
+        near = [s if i in own else cut_to_region(s, region) for i, s in zip(indices, spool.get(indices), strict=True)]
+        yield near, np.searchsorted(b.near, b.own).tolist(), ladder, steps
 
 
 def find_crossings_by_block(
-    surfaces: Sequence[CCS],
+    spool: Spool,
+    boxes: NDArray[np.float64],
     ladder: NDArray[np.float64],
     steps: Sequence[int],
     only: set[int] | None = None,
     executor: Executor | None = None,
     per_block: int | None = None,
+    touches: InputTouches | None = None,
 ) -> set[int]:
     """Indices of the surfaces in a new contact (with one of ``only``, if given), found block by block:
     the same answer as :func:`~engine.ccsm.topology.find_new_crossings` over the whole set with the input's
@@ -125,7 +173,11 @@ def find_crossings_by_block(
 
     Parameters
     ----------
-    surfaces, ladder, steps
+    spool
+        The surfaces, numbered 0 .. n - 1; only one block's (times the executor's look-ahead) are read at once.
+    boxes
+        (n, 4) their boxes (:func:`surface_boxes`).
+    ladder, steps
         As for :func:`~engine.ccsm.topology.find_new_crossings`.
     only
         Restrict the search to contacts that involve these surfaces (the ones just rebuilt).
@@ -133,14 +185,18 @@ def find_crossings_by_block(
         Where the blocks are checked (a local pool or a Dask cluster); None = this process.
     per_block
         Contours per block on average; None = :data:`BLOCK_CONTOURS`.
+    touches
+        The input's touching pairs, asked pair by pair (kept across calls so each pair is asked once); None =
+        a new one on the spool's base rows.
     """
-    boxes = surface_boxes(surfaces)
     checked = None if only is None else np.array(sorted(only), dtype=np.intp)
     blocks = spatial_blocks(boxes, checked, BLOCK_CONTOURS if per_block is None else per_block)
-    tasks = [
-        ([surfaces[i] for i in b.near], np.searchsorted(b.near, b.own).tolist(), ladder, list(steps)) for b in blocks
-    ]
+    touches = touches if touches is not None else input_touches(spool)
     found: set[int] = set()
-    for block, local in zip(blocks, map_ordered(executor, block_crossings, tasks), strict=True):
-        found.update(int(block.near[i]) for i in local)
+    tasks = _block_tasks(blocks, spool, boxes, ladder, list(steps))
+    for block, pairs in zip(blocks, map_ordered(executor, block_contacts, tasks), strict=True):
+        for a, b in pairs:
+            pair = (int(block.near[a]), int(block.near[b]))
+            if pair not in touches:
+                found.update(pair)
     return found

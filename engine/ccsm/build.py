@@ -7,17 +7,19 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
-from engine.ccsm.blocks import find_crossings_by_block
+from engine.ccsm.blocks import find_crossings_by_block, input_touches
 from engine.ccsm.ccs import CCS, build_ccs, check_contour, slice_area
 from engine.ccsm.regression import ScaleModel, fit_scale_model
+from engine.ccsm.spool import MemorySpool, Spool, in_batches
 from engine.errors import CCSMError
 from engine.parallel import local_pool, map_ordered
 from engine.params import BuildParams
@@ -119,6 +121,28 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+@dataclass
+class SpooledSet:
+    """A built set whose surfaces are in a spool (:mod:`engine.ccsm.spool`), numbered 0 .. ``count`` - 1 in
+    input order: what :func:`build_into` returns, to be written batch by batch. The other attributes are
+    those of :class:`BuiltSet`."""
+
+    spool: Spool
+    count: int
+    model: ScaleModel
+    params: BuildParams
+    working_crs: str
+    source_crs: str
+    bad_features: list[BadFeature]
+    name: str
+    interval: float | None
+    repaired: int
+
+    def surfaces_in_batches(self, size: int) -> Iterator[list[CCS]]:
+        """The surfaces in input order, ``size`` at a time (only one batch is read into memory)."""
+        return in_batches(self.spool, self.count, size)
+
+
 def build_contour_set(
     contour_set: ContourSet,
     params: BuildParams | None = None,
@@ -127,10 +151,48 @@ def build_contour_set(
     progress: ProgressCallback | None = None,
     executor: Executor | None = None,
 ) -> BuiltSet:
-    """Build the CCS of every contour of ``contour_set``.
+    """Build the CCS of every contour of ``contour_set``, in memory (:func:`build_into` with a memory spool).
+
+    Parameters and the build are those of :func:`build_into`.
+
+    Returns
+    -------
+    BuiltSet
+        Contours that could not be built are listed in ``bad_features`` with the reason; the rest are built.
+    """
+    spooled = build_into(MemorySpool(), contour_set, params, workers=workers, progress=progress, executor=executor)
+    return BuiltSet(
+        surfaces=spooled.spool.get(range(spooled.count)),
+        model=spooled.model,
+        params=spooled.params,
+        working_crs=spooled.working_crs,
+        source_crs=spooled.source_crs,
+        bad_features=spooled.bad_features,
+        name=spooled.name,
+        interval=spooled.interval,
+        repaired=spooled.repaired,
+    )
+
+
+def build_into(
+    spool: Spool,
+    contour_set: ContourSet,
+    params: BuildParams | None = None,
+    *,
+    workers: int | None = None,
+    progress: ProgressCallback | None = None,
+    executor: Executor | None = None,
+) -> SpooledSet:
+    """Build the CCS of every contour of ``contour_set`` into ``spool``, then repair crossings block by block.
+
+    Surfaces go to the spool as their chunks come back, and the repair reads one block's surfaces at a time,
+    so with a :class:`~engine.ccsm.spool.DiskSpool` the build holds the input contours and a few chunks and
+    blocks, not every surface (docs/design.md section 6).
 
     Parameters
     ----------
+    spool
+        Where the surfaces go, numbered in input order of the contours that could be built.
     contour_set
         Contours in a metric working CRS.
     params
@@ -140,65 +202,77 @@ def build_contour_set(
     progress
         Called with (done, total) after each chunk.
     executor
-        Where the chunks are built (a Dask cluster, see :mod:`engine.parallel`); None = a local pool of
-        ``workers`` processes, or this process.
-
-    Returns
-    -------
-    BuiltSet
-        Contours that could not be built are listed in ``bad_features`` with the reason; the rest are built.
+        Where the chunks, the blocks' checks and the rebuilds run (a Dask cluster, see :mod:`engine.parallel`);
+        None = a local pool of ``workers`` processes, or this process.
     """
     params = params or BuildParams()
-    # Check every contour first: one unusable contour must not break the grouping of the others.
-    contours = []
-    rejected: list[BadFeature] = []
-    for contour in contour_set.contours:
-        try:
-            check_contour(contour)
-        except CCSMError as exc:
-            rejected.append(BadFeature(contour.id, str(exc)))
-        else:
-            contours.append(contour)
+    contours, rejected = _usable(contour_set.contours)
     model, labels = fit_scale_model(contours, params)
     workers = default_workers() if workers is None else max(1, workers)
-    chunks = [
-        (contours[i : i + CHUNK], labels[i : i + CHUNK].tolist()) for i in range(0, len(contours), CHUNK)
-    ]
-    results: list[CCS | BadFeature] = []
-    done = 0
+    starts = range(0, len(contours), CHUNK)
+    tasks = ((contours[i : i + CHUNK], labels[i : i + CHUNK].tolist(), params, model) for i in starts)
+    built: list[int] = []  # index into ``contours`` of each surface, by its number in the spool
+    boxes: list[tuple[float, float, float, float]] = []
+    failed: list[BadFeature] = []
     total = len(contours)  # contours that passed the check; the rejected ones are reported, not built
     if progress:
         progress(0, total)
     # One BLAS thread per worker: OpenBLAS's own threads would fight the worker processes for the cores.
     # A given executor (a Dask cluster) runs the very same chunks and repair tasks; it is the caller's to shut
     # down. The local pool stays open through the crossing repair, whose checks and rebuilds it runs too.
-    with _pool(executor, workers, len(chunks)) as pool:
-        for chunk_results, (chunk, _) in zip(
-            map_ordered(pool, _build_chunk, [(c, lab, params, model) for c, lab in chunks]), chunks, strict=True
-        ):
-            results.extend(chunk_results)
-            done += len(chunk)
+    with _pool(executor, workers, len(starts)) as pool:
+        for start, results in zip(starts, map_ordered(pool, _build_chunk, tasks), strict=True):
+            surfaces = [(start + k, r) for k, r in enumerate(results) if isinstance(r, CCS)]
+            failed.extend(r for r in results if isinstance(r, BadFeature))
+            _put_all(spool, [(len(built) + k, s) for k, (_, s) in enumerate(surfaces)])
+            built.extend(i for i, _ in surfaces)
+            boxes.extend(s.bounds for _, s in surfaces)
             if progress:
-                progress(done, total)
-        built_pairs = [(c, r) for c, r in zip(contours, results, strict=True) if isinstance(r, CCS)]
+                progress(min(start + CHUNK, total), total)
         repaired = 0
-        if params.resolve_crossings and params.target_mode == "scale" and built_pairs:
+        if params.resolve_crossings and params.target_mode == "scale" and built:
             with threadpool_limits(1):
-                labels_built = labels_of(contours, labels, built_pairs)
-                repaired = resolve_crossings(built_pairs, labels_built, params, model, pool)
-    surfaces = [r for _, r in built_pairs]
-    bad = list(contour_set.bad_features) + rejected + [r for r in results if isinstance(r, BadFeature)]
-    return BuiltSet(
-        surfaces=surfaces,
+                inputs = [contours[i] for i in built]
+                repaired = resolve_crossings(
+                    spool, np.array(boxes), inputs, labels[built].tolist(), params, model, pool
+                )
+    return SpooledSet(
+        spool=spool,
+        count=len(built),
         model=model,
         params=params,
         working_crs=contour_set.working_crs,
         source_crs=contour_set.source_crs,
-        bad_features=bad,
+        bad_features=list(contour_set.bad_features) + rejected + failed,
         name=contour_set.name,
         interval=contour_set.interval,
         repaired=repaired,
     )
+
+
+def _usable(contours: Sequence[Contour]) -> tuple[list[Contour], list[BadFeature]]:
+    """The contours a CCS can be built from, and the others with the reason. Checked before anything is
+    built: one unusable contour must not break the grouping of the others."""
+    usable: list[Contour] = []
+    rejected: list[BadFeature] = []
+    for contour in contours:
+        try:
+            check_contour(contour)
+        except CCSMError as exc:
+            rejected.append(BadFeature(contour.id, str(exc)))
+        else:
+            usable.append(contour)
+    return usable, rejected
+
+
+def _put_all(spool: Spool, items: list[tuple[int, CCS]]) -> None:
+    """Keep surfaces in the spool, in one statement where the spool can."""
+    put_many = getattr(spool, "put_many", None)
+    if put_many is not None:
+        put_many(items)
+    else:
+        for i, s in items:
+            spool.put(i, s)
 
 
 #: Contours per rebuild task of the crossing repair: a round rebuilds a few hundred at most.
@@ -209,14 +283,6 @@ REPAIR_CHUNK = 16
 REPAIR_FACTORS = (0.5, 0.25, 0.125, 0.0)
 
 
-def labels_of(
-    contours: Sequence[Contour], labels: np.ndarray, pairs: Sequence[tuple[Contour, CCS]]
-) -> list[int]:
-    """Group label of each built contour."""
-    index = {id(c): i for i, c in enumerate(contours)}
-    return [int(labels[index[id(c)]]) for c, _ in pairs]
-
-
 def checked_ladder_steps(model: ScaleModel) -> list[int]:
     """Steps (ladder[k], ladder[k + 1]) checked for crossings: every one, so every scale from source to
     target is covered (docs/design.md section 4.8); beyond the target every slice is the target's."""
@@ -224,7 +290,9 @@ def checked_ladder_steps(model: ScaleModel) -> list[int]:
 
 
 def resolve_crossings(
-    pairs: list[tuple[Contour, CCS]],
+    spool: Spool,
+    boxes: NDArray[np.float64],
+    inputs: Sequence[Contour],
     labels: Sequence[int],
     params: BuildParams,
     model: ScaleModel,
@@ -241,10 +309,21 @@ def resolve_crossings(
     The check runs block by block (:mod:`engine.ccsm.blocks`: each block's contours against those that can
     reach them, the same pairs as a check of the whole set) and the rebuilds in chunks, both on ``executor``
     when given (a local pool or a Dask cluster), else in this process.
+
+    Parameters
+    ----------
+    spool
+        The surfaces, numbered 0 .. n - 1; rebuilt ones replace theirs.
+    boxes
+        (n, 4) each surface's box (kept up to date here).
+    inputs, labels
+        Each surface's input contour and regression group.
     """
     steps = checked_ladder_steps(model)
+    touches = input_touches(spool)
+    factors = np.ones(len(inputs))  # the first build uses the full target tolerance
     changed: set[int] = set()
-    involved = find_crossings_by_block([s for _, s in pairs], model.ladder, steps, None, executor)
+    involved = find_crossings_by_block(spool, boxes, model.ladder, steps, None, executor, touches=touches)
     round_ = 0
     while involved:
         factor = REPAIR_FACTORS[min(round_, len(REPAIR_FACTORS) - 1)]
@@ -252,18 +331,20 @@ def resolve_crossings(
         todo = []
         for i in sorted(involved):
             # Never coarser than before, and at least one step finer than its last build.
-            new_factor = min(factor, _next_factor(pairs[i][1].tolerance_factor))
-            if pairs[i][1].tolerance_factor > new_factor:
+            new_factor = min(factor, _next_factor(float(factors[i])))
+            if factors[i] > new_factor:
                 todo.append((i, new_factor))
         rebuilt_now: set[int] = set()
-        for (i, _), rebuilt in zip(todo, _rebuild(pairs, labels, todo, params, model, executor), strict=True):
+        for (i, _), rebuilt in zip(todo, _rebuild(inputs, labels, todo, params, model, executor), strict=True):
             if isinstance(rebuilt, CCS):
-                pairs[i] = (pairs[i][0], rebuilt)
+                spool.put(i, rebuilt)
+                boxes[i] = rebuilt.bounds
+                factors[i] = rebuilt.tolerance_factor
                 changed.add(i)
                 rebuilt_now.add(i)
         # Only the rebuilt contours can have made new crossings (or still have old ones).
         involved = (
-            find_crossings_by_block([s for _, s in pairs], model.ladder, steps, rebuilt_now, executor)
+            find_crossings_by_block(spool, boxes, model.ladder, steps, rebuilt_now, executor, touches=touches)
             if rebuilt_now
             else set()
         )
@@ -271,7 +352,7 @@ def resolve_crossings(
 
 
 def _rebuild(
-    pairs: Sequence[tuple[Contour, CCS]],
+    inputs: Sequence[Contour],
     labels: Sequence[int],
     todo: Sequence[tuple[int, float]],
     params: BuildParams,
@@ -281,7 +362,7 @@ def _rebuild(
     """Rebuild contours ``todo`` = (index, tolerance factor), in chunks on ``executor``; results in order."""
     tasks = [
         (
-            [pairs[i][0] for i, _ in todo[k : k + REPAIR_CHUNK]],
+            [inputs[i] for i, _ in todo[k : k + REPAIR_CHUNK]],
             [labels[i] for i, _ in todo[k : k + REPAIR_CHUNK]],
             params,
             model,

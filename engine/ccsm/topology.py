@@ -310,15 +310,14 @@ class InputTouches:
         return self._known[(i, j)]
 
 
-def find_new_crossings(
+def new_contact_pairs(
     surfaces: Sequence[CCS],
     ladder: NDArray[np.float64],
     steps: Sequence[int],
-    allowed: Container[tuple[int, int]],
     only: set[int] | None = None,
-) -> set[int]:
-    """Indices of surfaces whose slice meets another visible slice at any scale from ``ladder[k]`` to
-    ``ladder[k + 1]`` for k in ``steps``, beyond ``allowed``.
+) -> set[tuple[int, int]]:
+    """Pairs (i, j), i < j, of surfaces whose visible slices meet at some scale from ``ladder[k]`` to
+    ``ladder[k + 1]`` for k in ``steps``, whether or not they already meet in the input.
 
     Between two neighbouring ladder scales each slice's vertices move straight at one pace
     (docs/design.md section 4.8), so :class:`SweepIndex` covers every scale of the step, not a sample.
@@ -328,27 +327,34 @@ def find_new_crossings(
     Parameters
     ----------
     surfaces
-        Every CCS of the set, each with its ``t_at_scale`` table on ``ladder``.
+        CCS, each with its ``t_at_scale`` table on ``ladder``.
     ladder, steps
         The scale ladder and the indices k of the steps (ladder[k], ladder[k + 1]) to check.
-    allowed
-        Pairs (i, j), i < j, that already meet in the input.
     only
-        Restrict the search to crossings that involve these surfaces (the ones just rebuilt).
+        Restrict the search to contacts that involve these surfaces (the ones just rebuilt).
     """
     index = SweepIndex.of([s.base for s in surfaces], [s.top for s in surfaces], only)
     tables = np.array([s.t_at_scale for s in surfaces]).reshape(len(surfaces), -1)
     vanish = np.array([s.vanish_scale for s in surfaces])
 
-    def check(k: int) -> set[int]:
-        found: set[int] = set()
-        for pair in index.contacts(tables[:, k], tables[:, k + 1], vanish > ladder[k]):
-            if pair not in allowed:
-                found.update(pair)
-        return found
+    def check(k: int) -> set[tuple[int, int]]:
+        return index.contacts(tables[:, k], tables[:, k + 1], vanish > ladder[k])
 
     with ThreadPoolExecutor(max_workers=CHECK_THREADS) as pool:
         return set().union(*pool.map(check, steps))
+
+
+def find_new_crossings(
+    surfaces: Sequence[CCS],
+    ladder: NDArray[np.float64],
+    steps: Sequence[int],
+    allowed: Container[tuple[int, int]],
+    only: set[int] | None = None,
+) -> set[int]:
+    """Indices of surfaces whose slice meets another visible slice at any scale from ``ladder[k]`` to
+    ``ladder[k + 1]`` for k in ``steps``, beyond ``allowed`` (pairs (i, j), i < j, that already meet in the
+    input); the other parameters as for :func:`new_contact_pairs`."""
+    return {i for pair in new_contact_pairs(surfaces, ladder, steps, only) if pair not in allowed for i in pair}
 
 
 def _orientation(a: NDArray[np.float64], b: NDArray[np.float64], c: NDArray[np.float64]) -> NDArray[np.float64]:

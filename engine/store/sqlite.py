@@ -591,7 +591,7 @@ class CCSStore:
         now = time.time()
         cur.execute(
             "INSERT INTO builds VALUES (?,?,?,?,?,?,?,?,?)",
-            (dataset, "building", 0, int(total), None, os.getpid(), _host(), now, now),
+            (dataset, "building", 0, int(total), None, os.getpid(), host_name(), now, now),
         )
 
     def reserve(self, dataset: str, total: int = 0) -> bool:
@@ -628,7 +628,7 @@ class CCSStore:
         with self._write() as cur:
             cur.execute(
                 "UPDATE builds SET done=?, total=?, pid=?, host=?, updated=? WHERE dataset=? AND state='building'",
-                (int(done), int(total), os.getpid(), _host(), time.time(), dataset),
+                (int(done), int(total), os.getpid(), host_name(), time.time(), dataset),
             )
             return cur.rowcount > 0
 
@@ -702,7 +702,7 @@ class CCSStore:
             started = now if row is None or state == "building" and done == 0 else row[0]
             cur.execute(
                 "INSERT OR REPLACE INTO builds VALUES (?,?,?,?,?,?,?,?,?)",
-                (dataset, state, done, total, error, os.getpid(), _host(), started, now),
+                (dataset, state, done, total, error, os.getpid(), host_name(), started, now),
             )
 
     def clear_build_status(self, dataset: str) -> None:
@@ -715,7 +715,7 @@ class CCSStore:
         out = {}
         for r in self._con().execute("SELECT * FROM builds"):
             status = BuildStatus(*r)
-            if status.state == "building" and status.host == _host() and not pid_alive(status.pid):
+            if status.state == "building" and status.host == host_name() and not pid_alive(status.pid):
                 status = BuildStatus(
                     status.dataset,
                     "failed",
@@ -735,5 +735,6 @@ class CCSStore:
         return self._con().execute("PRAGMA integrity_check").fetchone()[0] == "ok"
 
 
-def _host() -> str:
+def host_name() -> str:
+    """This machine's name, as builds record it."""
     return os.uname().nodename if hasattr(os, "uname") else "localhost"

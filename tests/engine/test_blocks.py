@@ -8,8 +8,9 @@ import shapely
 from numpy.testing import assert_array_equal
 
 import engine.ccsm.blocks as blocks
-from engine.ccsm.blocks import find_crossings_by_block, spatial_blocks
+from engine.ccsm.blocks import find_crossings_by_block, spatial_blocks, surface_boxes
 from engine.ccsm.build import BuiltSet, build_contour_set, checked_ladder_steps
+from engine.ccsm.spool import MemorySpool
 from engine.ccsm.topology import InputTouches, find_new_crossings
 from engine.params import BuildParams
 from engine.types import Contour, ContourSet
@@ -62,10 +63,14 @@ def test_blocks_find_the_same_contacts_as_the_whole_set(unrepaired: BuiltSet) ->
     steps = checked_ladder_steps(unrepaired.model)
     whole = find_new_crossings(surfaces, ladder, steps, InputTouches([s.at(0.0) for s in surfaces]))
     assert len(whole) > 10  # the DP targets of the rings cross: there is something to find
-    assert find_crossings_by_block(surfaces, ladder, steps, per_block=4) == whole
+    spool = MemorySpool()
+    for i, s in enumerate(surfaces):
+        spool.put(i, s)
+    boxes = surface_boxes(surfaces)
+    assert find_crossings_by_block(spool, boxes, ladder, steps, per_block=4) == whole
     only = set(range(0, len(surfaces), 3))
     with_only = find_new_crossings(surfaces, ladder, steps, InputTouches([s.at(0.0) for s in surfaces]), only)
-    assert find_crossings_by_block(surfaces, ladder, steps, only, per_block=4) == with_only
+    assert find_crossings_by_block(spool, boxes, ladder, steps, only, per_block=4) == with_only
 
 
 @pytest.fixture(scope="module")
