@@ -1,12 +1,15 @@
-"""Spatial blocks for the crossing repair: each block's contours are checked against the contours that can reach
-them, not against the whole set (docs/design.md section 4.8, issue 12 item 2).
+"""Spatial blocks for the crossing repair: each block's contours are checked against the stretches of other
+contours that can reach them, not against the whole set (docs/design.md section 4.8, issue 12 item 2).
 
-A contour belongs to the block of a square grid over the set that holds its box centre; its box is the box of
-its base and top rows, which holds every slice at every t. A block's *near* contours are its own and every
-contour whose box overlaps one of theirs: the only contours whose slices can meet its own. Checking each block's
-own contours against its near ones therefore finds exactly the meeting pairs a check of the whole set finds
-(each pair at least once, from the block of either contour), so the repair's decisions do not change. Each
-block's check needs only its near contours' rows: blocks are checked apart from each other, on any executor.
+Every surface is cut into pieces of :data:`INDEX_PIECE_SEGMENTS` segments, and each piece has a swept box: the
+box of its rows at t = 0 and t = 1, which holds its slices at every t. A contour belongs to the block of a
+square grid that holds its box centre. A block's *near* stretches are its own contours and, of every other
+contour, the rows from its first to its last piece whose box meets a piece box of an own contour: the only
+rows whose slices can meet the block's contours. Checking each block's own contours against its near
+stretches therefore finds exactly the meeting pairs a check of the whole set finds (each pair at least once,
+from the block of either contour), so the repair's decisions do not change. The piece boxes stay in memory
+(a few numbers per 16 rows); a block's surfaces are read from the spool only when its check is sent, so
+blocks are checked apart from each other, on any executor, with memory for a few blocks at a time.
 """
 
 from __future__ import annotations
@@ -22,17 +25,82 @@ import shapely
 from numpy.typing import NDArray
 
 from engine.ccsm.spool import Spool
-from engine.ccsm.topology import InputTouches, new_contact_pairs
+from engine.ccsm.topology import InputTouches, new_contact_pairs, per_piece, piece_ranges
 from engine.parallel import map_ordered
 from engine.types import Coords
 
 if TYPE_CHECKING:
     from engine.ccsm.ccs import CCS
 
-#: Contours per block on average. A long contour's box overlaps many blocks, so every block it reaches indexes
-#: it again: on the sample 9 blocks cost 7.9 s of CPU in the first check against 7.3 s for 2 (and 6.8 s for the
-#: whole-set check before the blocks); few, large blocks until that is fixed.
+#: Contours per block on average: large enough that a block's check is worth a task, small enough that its
+#: surfaces are a small share of a big build's memory.
 BLOCK_CONTOURS = 1024
+
+#: Rebuilt contours per block when only they are checked again: small blocks keep each check to the rebuilt
+#: contours' surroundings.
+REBUILT_PER_BLOCK = 16
+
+#: Segments per piece of the blocks' index: short enough that a contour passing by a block is cut close to the
+#: block, long enough that the index is a small fraction of the rows.
+INDEX_PIECE_SEGMENTS = 16
+
+
+class PieceIndex:
+    """The swept boxes of every surface's pieces, by surface number; a rebuilt surface's pieces replace its old
+    ones (:meth:`put`).
+
+    >>> from engine.ccsm.ccs import CCS
+    >>> line = np.column_stack([np.arange(40.0), np.zeros(40)])
+    >>> index = PieceIndex()
+    >>> index.put([0], [CCS("a", 1.0, False, line, line + [0, 2], np.zeros(1), np.ones(1), 39.0, 40, 40)])
+    >>> index.arrays()[0].tolist()  # (minx, miny, maxx, maxy) of segments 0-16, 16-32, 32-39
+    [[0.0, 0.0, 16.0, 2.0], [16.0, 0.0, 32.0, 2.0], [32.0, 0.0, 39.0, 2.0]]
+    """
+
+    def __init__(self) -> None:
+        self._boxes: dict[int, NDArray[np.float64]] = {}
+        self._first: dict[int, NDArray[np.intp]] = {}
+        self._last: dict[int, NDArray[np.intp]] = {}
+
+    def put(self, numbers: Sequence[int], surfaces: Sequence[CCS]) -> None:
+        """Index ``surfaces`` as numbers ``numbers`` (one vectorised pass for them all)."""
+        if not len(surfaces):
+            return
+        sizes = np.array([len(s.base) for s in surfaces], dtype=np.intp)
+        first, last, owner = piece_ranges(sizes, INDEX_PIECE_SEGMENTS)
+        base = np.concatenate([s.base for s in surfaces])
+        top = np.concatenate([s.top for s in surfaces])
+        lo = per_piece(np.minimum, np.minimum(base, top), first, last)
+        hi = per_piece(np.maximum, np.maximum(base, top), first, last)
+        offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        cuts = np.searchsorted(owner, np.arange(1, len(surfaces)))
+        parts = zip(np.split(np.hstack([lo, hi]), cuts), np.split(first, cuts), np.split(last, cuts), strict=True)
+        for k, (boxes, f, la) in enumerate(parts):
+            number = int(numbers[k])
+            self._boxes[number] = boxes
+            self._first[number] = (f - offsets[k]).astype(np.intp)
+            self._last[number] = (la - offsets[k]).astype(np.intp)
+
+    def arrays(
+        self,
+    ) -> tuple[NDArray[np.float64], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]:
+        """(boxes (P, 4), first row, last row, owner, start) of every piece, sorted by owner; ``start[i]`` is
+        the first piece of surface i (``start`` has one more entry, the number of pieces)."""
+        numbers = sorted(self._boxes)
+        counts = np.array([len(self._first[i]) for i in numbers], dtype=np.intp)
+        start = np.zeros((numbers[-1] + 2) if numbers else 1, dtype=np.intp)
+        start[np.array(numbers, dtype=np.intp) + 1] = counts
+        start = np.cumsum(start)
+        if not numbers:
+            empty = np.zeros(0, dtype=np.intp)
+            return np.zeros((0, 4)), empty, empty, empty, start
+        return (
+            np.concatenate([self._boxes[i] for i in numbers]),
+            np.concatenate([self._first[i] for i in numbers]),
+            np.concatenate([self._last[i] for i in numbers]),
+            np.repeat(np.array(numbers, dtype=np.intp), counts),
+            start,
+        )
 
 
 @dataclass(frozen=True)
@@ -44,90 +112,100 @@ class Block:
     own
         (k,) indices of the contours whose box centre lies in the cell.
     near
-        (m,) sorted indices of ``own`` and of every contour whose box overlaps the box of one of them.
+        (m,) sorted indices of ``own`` and of every contour with a piece whose box meets a piece box of an own one.
+    first, last
+        (m,) the rows of each near contour to check: first to last (inclusive); -1 for the whole contour.
     """
 
     own: NDArray[np.intp]
     near: NDArray[np.intp]
+    first: NDArray[np.intp]
+    last: NDArray[np.intp]
 
 
 def surface_boxes(surfaces: Sequence[CCS]) -> NDArray[np.float64]:
     """(n, 4) box (minx, miny, maxx, maxy), metres, of each surface's base and top rows: every slice lies inside."""
-    out = np.empty((len(surfaces), 4))
-    for i, s in enumerate(surfaces):
-        both = np.concatenate([s.base, s.top])
-        out[i, :2] = both.min(axis=0)
-        out[i, 2:] = both.max(axis=0)
-    return out
+    return np.array([s.bounds for s in surfaces], dtype=np.float64).reshape(-1, 4)
 
 
 def spatial_blocks(
-    boxes: NDArray[np.float64], only: NDArray[np.intp] | None = None, per_block: int = BLOCK_CONTOURS
+    boxes: NDArray[np.float64],
+    pieces: PieceIndex,
+    only: NDArray[np.intp] | None = None,
+    per_block: int = BLOCK_CONTOURS,
 ) -> list[Block]:
-    """The blocks of a grid over the boxes' centres, in row-major order; empty cells are left out.
+    """The blocks of a grid over the owned contours' box centres, in row-major order; empty cells are left out.
 
     Parameters
     ----------
     boxes
         (n, 4) contour boxes (:func:`surface_boxes`).
+    pieces
+        The pieces of the same n surfaces.
     only
         If given, a block owns only these contours (the ones to check); all contours still count as near.
     per_block
-        Contours per block on average (the grid has about n / per_block cells).
-
-    >>> boxes = np.array([[0, 0, 1, 1], [0.5, 0.5, 2, 2], [9, 9, 10, 10]], dtype=float)
-    >>> [(b.own.tolist(), b.near.tolist()) for b in spatial_blocks(boxes, per_block=1)]
-    [([0, 1], [0, 1]), ([2], [2])]
+        Owned contours per block on average (the grid has about len(only) / per_block cells).
     """
     n = len(boxes)
     owned = np.arange(n, dtype=np.intp) if only is None else np.asarray(only, dtype=np.intp)
     if n == 0 or len(owned) == 0:
         return []
-    side = max(1, math.ceil(math.sqrt(n / max(1, per_block))))
-    centres = (boxes[:, :2] + boxes[:, 2:]) / 2
+    # The grid spans the owned contours only: a few rebuilt contours get small blocks of their own.
+    side = max(1, math.ceil(math.sqrt(len(owned) / max(1, per_block))))
+    centres = (boxes[owned, :2] + boxes[owned, 2:]) / 2
     lo = centres.min(axis=0)
     span = np.maximum(centres.max(axis=0) - lo, 1e-9)
-    cell = np.minimum((((centres[owned] - lo) / span) * side).astype(np.intp), side - 1)
+    cell = np.minimum((((centres - lo) / span) * side).astype(np.intp), side - 1)
     key = cell[:, 1] * side + cell[:, 0]
     order = np.argsort(key, kind="stable")
-    tree = shapely.STRtree(shapely.box(boxes[:, 0], boxes[:, 1], boxes[:, 2], boxes[:, 3]))
+    piece_boxes, first, last, owner, start = pieces.arrays()
+    geoms = shapely.box(piece_boxes[:, 0], piece_boxes[:, 1], piece_boxes[:, 2], piece_boxes[:, 3])
+    tree = shapely.STRtree(geoms)
     blocks = []
     for group in np.split(owned[order], np.flatnonzero(np.diff(key[order])) + 1):
         own = np.sort(group)
-        _, hits = tree.query(shapely.box(*boxes[own].T))
-        blocks.append(Block(own=own, near=np.union1d(own, hits).astype(np.intp)))
+        counts = start[own + 1] - start[own]
+        own_pieces = (
+            np.repeat(start[own], counts) + np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+        )
+        _, hit = tree.query(geoms[own_pieces])
+        blocks.append(_block(own, hit, first, last, owner))
     return blocks
 
 
-def cut_to_region(surface: CCS, region: NDArray[np.float64]) -> CCS | None:
-    """The stretch of ``surface`` whose segments can reach ``region`` (minx, miny, maxx, maxy), or None.
-
-    A segment's slices at every t lie in the box of its ends' rows at t = 0 and t = 1, so a segment whose box
-    misses the region can meet nothing inside it. The rows from the first to the last segment that reaches the
-    region are kept (one stretch, so the vertices' motion is unchanged): a contour that runs through many
-    blocks is then checked in each for about its length there, not for its whole length.
-    """
-    rows = np.concatenate([surface.base[:, None], surface.top[:, None]], axis=1)  # (M, 2 rows, 2)
-    lo, hi = rows.min(axis=1), rows.max(axis=1)
-    seg_lo, seg_hi = np.minimum(lo[:-1], lo[1:]), np.maximum(hi[:-1], hi[1:])
-    reach = np.flatnonzero(np.all((seg_lo <= region[2:]) & (seg_hi >= region[:2]), axis=1))
-    if not len(reach):
-        return None
-    first, last = int(reach[0]), int(reach[-1]) + 2
-    if first == 0 and last == len(rows):
-        return surface
-    return replace(surface, base=surface.base[first:last], top=surface.top[first:last])
+def _block(
+    own: NDArray[np.intp],
+    hit: NDArray[np.intp],
+    first: NDArray[np.intp],
+    last: NDArray[np.intp],
+    owner: NDArray[np.intp],
+) -> Block:
+    """A block from its own contours and the pieces that meet theirs: each other contour's stretch is the rows
+    from its first to its last piece met."""
+    hit = np.unique(hit)
+    others = hit[~np.isin(owner[hit], own)]
+    by_owner = others[np.argsort(owner[others], kind="stable")]
+    owners, begin = np.unique(owner[by_owner], return_index=True)
+    rows_from = np.minimum.reduceat(first[by_owner], begin) if len(begin) else np.zeros(0, dtype=np.intp)
+    rows_to = np.maximum.reduceat(last[by_owner], begin) if len(begin) else np.zeros(0, dtype=np.intp)
+    near = np.concatenate([own, owners]).astype(np.intp)
+    order = np.argsort(near, kind="stable")
+    whole = np.full(len(own), -1, dtype=np.intp)
+    return Block(
+        own=own,
+        near=near[order],
+        first=np.concatenate([whole, rows_from]).astype(np.intp)[order],
+        last=np.concatenate([whole, rows_to]).astype(np.intp)[order],
+    )
 
 
 def block_contacts(
-    near: Sequence[CCS | None], own: Sequence[int], ladder: NDArray[np.float64], steps: Sequence[int]
+    near: Sequence[CCS], own: Sequence[int], ladder: NDArray[np.float64], steps: Sequence[int]
 ) -> set[tuple[int, int]]:
     """Pairs (i, j), i < j, of local indices (into ``near``) whose slices meet at some checked step, each with
-    an ``own`` surface in it; None stands for a surface that cannot reach the block (so it meets nothing)."""
-    kept = [i for i, s in enumerate(near) if s is not None]
-    position = {i: k for k, i in enumerate(kept)}
-    found = new_contact_pairs([near[i] for i in kept], ladder, steps, {position[i] for i in own})  # type: ignore[misc]
-    return {(kept[a], kept[b]) for a, b in found}
+    an ``own`` surface in it."""
+    return new_contact_pairs(near, ladder, steps, set(own))
 
 
 def input_touches(spool: Spool) -> InputTouches:
@@ -146,20 +224,22 @@ class _SpoolBases:
 
 
 def _block_tasks(
-    blocks: Sequence[Block], spool: Spool, boxes: NDArray[np.float64], ladder: NDArray[np.float64], steps: list[int]
+    blocks: Sequence[Block], spool: Spool, ladder: NDArray[np.float64], steps: list[int]
 ) -> Iterator[tuple[Any, ...]]:
     """One task per block, each block's surfaces read from the spool only when its task is sent."""
     for b in blocks:
-        region = np.concatenate([boxes[b.own, :2].min(axis=0), boxes[b.own, 2:].max(axis=0)])
-        own = set(b.own.tolist())
-        indices = b.near.tolist()
-        near = [s if i in own else cut_to_region(s, region) for i, s in zip(indices, spool.get(indices), strict=True)]
+        surfaces = spool.get(b.near.tolist())
+        near = [
+            s if f < 0 else replace(s, base=s.base[f : la + 1], top=s.top[f : la + 1])
+            for s, f, la in zip(surfaces, b.first.tolist(), b.last.tolist(), strict=True)
+        ]
         yield near, np.searchsorted(b.near, b.own).tolist(), ladder, steps
 
 
 def find_crossings_by_block(
     spool: Spool,
     boxes: NDArray[np.float64],
+    pieces: PieceIndex,
     ladder: NDArray[np.float64],
     steps: Sequence[int],
     only: set[int] | None = None,
@@ -177,6 +257,8 @@ def find_crossings_by_block(
         The surfaces, numbered 0 .. n - 1; only one block's (times the executor's look-ahead) are read at once.
     boxes
         (n, 4) their boxes (:func:`surface_boxes`).
+    pieces
+        Their pieces.
     ladder, steps
         As for :func:`~engine.ccsm.topology.find_new_crossings`.
     only
@@ -184,16 +266,19 @@ def find_crossings_by_block(
     executor
         Where the blocks are checked (a local pool or a Dask cluster); None = this process.
     per_block
-        Contours per block on average; None = :data:`BLOCK_CONTOURS`.
+        Owned contours per block on average; None = :data:`BLOCK_CONTOURS`, or :data:`REBUILT_PER_BLOCK`
+        with ``only``.
     touches
         The input's touching pairs, asked pair by pair (kept across calls so each pair is asked once); None =
         a new one on the spool's base rows.
     """
     checked = None if only is None else np.array(sorted(only), dtype=np.intp)
-    blocks = spatial_blocks(boxes, checked, BLOCK_CONTOURS if per_block is None else per_block)
+    if per_block is None:
+        per_block = BLOCK_CONTOURS if only is None else REBUILT_PER_BLOCK
+    blocks = spatial_blocks(boxes, pieces, checked, per_block)
     touches = touches if touches is not None else input_touches(spool)
     found: set[int] = set()
-    tasks = _block_tasks(blocks, spool, boxes, ladder, list(steps))
+    tasks = _block_tasks(blocks, spool, ladder, list(steps))
     for block, pairs in zip(blocks, map_ordered(executor, block_contacts, tasks), strict=True):
         for a, b in pairs:
             pair = (int(block.near[a]), int(block.near[b]))

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
-from engine.ccsm.blocks import find_crossings_by_block, input_touches
+from engine.ccsm.blocks import PieceIndex, find_crossings_by_block, input_touches
 from engine.ccsm.ccs import CCS, build_ccs, check_contour, slice_area
 from engine.ccsm.regression import ScaleModel, fit_scale_model
 from engine.ccsm.spool import MemorySpool, Spool, in_batches
@@ -213,6 +213,7 @@ def build_into(
     tasks = ((contours[i : i + CHUNK], labels[i : i + CHUNK].tolist(), params, model) for i in starts)
     built: list[int] = []  # index into ``contours`` of each surface, by its number in the spool
     boxes: list[tuple[float, float, float, float]] = []
+    pieces = PieceIndex()  # the surfaces' pieces, for the repair's blocks
     failed: list[BadFeature] = []
     total = len(contours)  # contours that passed the check; the rejected ones are reported, not built
     if progress:
@@ -224,7 +225,9 @@ def build_into(
         for start, results in zip(starts, map_ordered(pool, _build_chunk, tasks), strict=True):
             surfaces = [(start + k, r) for k, r in enumerate(results) if isinstance(r, CCS)]
             failed.extend(r for r in results if isinstance(r, BadFeature))
-            _put_all(spool, [(len(built) + k, s) for k, (_, s) in enumerate(surfaces)])
+            numbered = [(len(built) + k, s) for k, (_, s) in enumerate(surfaces)]
+            _put_all(spool, numbered)
+            pieces.put([k for k, _ in numbered], [s for _, s in numbered])
             built.extend(i for i, _ in surfaces)
             boxes.extend(s.bounds for _, s in surfaces)
             if progress:
@@ -234,7 +237,7 @@ def build_into(
             with threadpool_limits(1):
                 inputs = [contours[i] for i in built]
                 repaired = resolve_crossings(
-                    spool, np.array(boxes), inputs, labels[built].tolist(), params, model, pool
+                    spool, np.array(boxes), pieces, inputs, labels[built].tolist(), params, model, pool
                 )
     return SpooledSet(
         spool=spool,
@@ -292,6 +295,7 @@ def checked_ladder_steps(model: ScaleModel) -> list[int]:
 def resolve_crossings(
     spool: Spool,
     boxes: NDArray[np.float64],
+    pieces: PieceIndex,
     inputs: Sequence[Contour],
     labels: Sequence[int],
     params: BuildParams,
@@ -314,8 +318,8 @@ def resolve_crossings(
     ----------
     spool
         The surfaces, numbered 0 .. n - 1; rebuilt ones replace theirs.
-    boxes
-        (n, 4) each surface's box (kept up to date here).
+    boxes, pieces
+        (n, 4) each surface's box, and their pieces (both kept up to date here).
     inputs, labels
         Each surface's input contour and regression group.
     """
@@ -323,7 +327,7 @@ def resolve_crossings(
     touches = input_touches(spool)
     factors = np.ones(len(inputs))  # the first build uses the full target tolerance
     changed: set[int] = set()
-    involved = find_crossings_by_block(spool, boxes, model.ladder, steps, None, executor, touches=touches)
+    involved = find_crossings_by_block(spool, boxes, pieces, model.ladder, steps, None, executor, touches=touches)
     round_ = 0
     while involved:
         factor = REPAIR_FACTORS[min(round_, len(REPAIR_FACTORS) - 1)]
@@ -339,12 +343,13 @@ def resolve_crossings(
             if isinstance(rebuilt, CCS):
                 spool.put(i, rebuilt)
                 boxes[i] = rebuilt.bounds
+                pieces.put([i], [rebuilt])
                 factors[i] = rebuilt.tolerance_factor
                 changed.add(i)
                 rebuilt_now.add(i)
         # Only the rebuilt contours can have made new crossings (or still have old ones).
         involved = (
-            find_crossings_by_block(spool, boxes, model.ladder, steps, rebuilt_now, executor, touches=touches)
+            find_crossings_by_block(spool, boxes, pieces, model.ladder, steps, rebuilt_now, executor, touches=touches)
             if rebuilt_now
             else set()
         )

@@ -152,8 +152,8 @@ class SweepIndex:
         if len(first) == 0:
             return cls.empty()
         # Every slice of a piece, at any t, stays inside the box of its rows at t = 0 and t = 1.
-        lo = _per_piece(np.minimum, np.minimum(base, top), first, last)
-        hi = _per_piece(np.maximum, np.maximum(base, top), first, last)
+        lo = per_piece(np.minimum, np.minimum(base, top), first, last)
+        hi = per_piece(np.maximum, np.maximum(base, top), first, last)
         boxes = shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1])
         probes = np.arange(len(boxes)) if only is None else np.flatnonzero(np.isin(owner, list(only)))
         p, q = shapely.STRtree(boxes).query(boxes[probes])
@@ -205,8 +205,8 @@ class SweepIndex:
             keep &= shown[self.owner[self.p]] & shown[self.owner[self.q]]
         p, q = self.p[keep], self.q[keep]
         # Pieces whose boxes over this motion miss each other cannot meet either.
-        lo = _per_piece(np.minimum, np.minimum(a, b), self.first, self.last)
-        hi = _per_piece(np.maximum, np.maximum(a, b), self.first, self.last)
+        lo = per_piece(np.minimum, np.minimum(a, b), self.first, self.last)
+        hi = per_piece(np.maximum, np.maximum(a, b), self.first, self.last)
         near = np.all((lo[p] <= hi[q]) & (lo[q] <= hi[p]), axis=1)
         p, q = p[near], q[near]
         hit = pieces_meet(a, b, self.first, self.last, p, q)
@@ -267,7 +267,7 @@ def _close_enough(
     geoms = np.empty(len(first), dtype=object)
     geoms[pieces] = shapely.linestrings(base[point], indices=np.repeat(np.arange(len(pieces)), counts))
     move = np.linalg.norm(top - base, axis=1)
-    reach = _per_piece(np.maximum, move[:, None], first, last)[:, 0]
+    reach = per_piece(np.maximum, move[:, None], first, last)[:, 0]
     # INPUT_TOUCH_M of slack: a pair exactly at the limit is kept, whatever the rounding of the distance.
     gap = shapely.distance(geoms[p], geoms[q])
     near = gap <= reach[p] + reach[q] + INPUT_TOUCH_M
@@ -281,7 +281,7 @@ def _stacked(lines: Sequence[Coords]) -> NDArray[np.float64]:
     return np.concatenate([np.asarray(line, dtype=np.float64) for line in lines])
 
 
-def _per_piece(
+def per_piece(
     ufunc: np.ufunc, values: NDArray[np.float64], first: NDArray[np.intp], last: NDArray[np.intp]
 ) -> NDArray[np.float64]:
     """``ufunc`` (np.minimum or np.maximum) of ``values`` over each piece's points first..last."""

@@ -8,8 +8,9 @@ import shapely
 from numpy.testing import assert_array_equal
 
 import engine.ccsm.blocks as blocks
-from engine.ccsm.blocks import find_crossings_by_block, spatial_blocks, surface_boxes
+from engine.ccsm.blocks import PieceIndex, find_crossings_by_block, spatial_blocks, surface_boxes
 from engine.ccsm.build import BuiltSet, build_contour_set, checked_ladder_steps
+from engine.ccsm.ccs import CCS
 from engine.ccsm.spool import MemorySpool
 from engine.ccsm.topology import InputTouches, find_new_crossings
 from engine.params import BuildParams
@@ -42,19 +43,48 @@ def unrepaired(clusters: ContourSet) -> BuiltSet:
     return build_contour_set(clusters, BuildParams(resolve_crossings=False), workers=1)
 
 
-def test_every_contour_is_owned_once_and_its_block_holds_every_contour_whose_box_meets_it() -> None:
-    rng = np.random.default_rng(1)
-    lo = rng.uniform(0, 1_000, (300, 2))
-    boxes = np.column_stack([lo, lo + rng.uniform(1, 120, (300, 2))])
-    found = spatial_blocks(boxes, per_block=8)
+def random_lines(n: int = 300, seed: int = 1) -> list[CCS]:
+    """Random wiggly open lines of 20-80 points whose top rows are their base rows moved a little."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        m = int(rng.integers(20, 80))
+        start = rng.uniform(0, 1_000, 2)
+        base = start + np.cumsum(rng.normal(0, 4, (m, 2)), axis=0)
+        top = base + rng.normal(0, 1, (m, 2))
+        out.append(CCS(i, 0.0, False, base, top, np.zeros(1), np.ones(1), 1.0, m, m))
+    return out
+
+
+def test_every_contour_is_owned_once_and_its_block_holds_every_stretch_that_can_meet_it() -> None:
+    surfaces = random_lines()
+    boxes = surface_boxes(surfaces)
+    pieces = PieceIndex()
+    pieces.put(range(len(surfaces)), surfaces)
+    found = spatial_blocks(boxes, pieces, per_block=8)
     assert len(found) > 10
     owners = np.concatenate([b.own for b in found])
-    assert sorted(owners.tolist()) == list(range(300))
-    geoms = shapely.box(*boxes.T)
+    assert sorted(owners.tolist()) == list(range(len(surfaces)))
+    # Reference: every segment's swept box against every segment of the block's own contours.
+    segments = []
+    for s in surfaces:
+        rows = np.stack([s.base, s.top], axis=1)
+        lo, hi = rows.min(axis=1), rows.max(axis=1)
+        segments.append(shapely.box(*np.minimum(lo[:-1], lo[1:]).T, *np.maximum(hi[:-1], hi[1:]).T))
+    cut_somewhere = False
     for b in found:
-        for i in b.own:
-            meets = np.flatnonzero(shapely.intersects(geoms[i], geoms))
-            assert set(meets.tolist()) <= set(b.near.tolist())
+        own_segments = np.concatenate([segments[i] for i in b.own])
+        tree = shapely.STRtree(own_segments)
+        stretch = {int(i): (int(f), int(la)) for i, f, la in zip(b.near, b.first, b.last, strict=True)}
+        for j in set(range(len(surfaces))) - set(b.own.tolist()):
+            touching = np.flatnonzero([len(tree.query(g)) > 0 for g in segments[j]])
+            if not len(touching):
+                continue
+            assert j in stretch, f"contour {j} reaches block {b.own[:3]} but is not near it"
+            first, last = stretch[j]
+            assert first <= touching[0] and touching[-1] + 1 <= last
+            cut_somewhere |= last - first + 1 < len(surfaces[j].base)
+    assert cut_somewhere  # the stretches really are cut to the blocks
 
 
 def test_blocks_find_the_same_contacts_as_the_whole_set(unrepaired: BuiltSet) -> None:
@@ -67,10 +97,12 @@ def test_blocks_find_the_same_contacts_as_the_whole_set(unrepaired: BuiltSet) ->
     for i, s in enumerate(surfaces):
         spool.put(i, s)
     boxes = surface_boxes(surfaces)
-    assert find_crossings_by_block(spool, boxes, ladder, steps, per_block=4) == whole
+    pieces = PieceIndex()
+    pieces.put(range(len(surfaces)), surfaces)
+    assert find_crossings_by_block(spool, boxes, pieces, ladder, steps, per_block=4) == whole
     only = set(range(0, len(surfaces), 3))
     with_only = find_new_crossings(surfaces, ladder, steps, InputTouches([s.at(0.0) for s in surfaces]), only)
-    assert find_crossings_by_block(spool, boxes, ladder, steps, only, per_block=4) == with_only
+    assert find_crossings_by_block(spool, boxes, pieces, ladder, steps, only, per_block=4) == with_only
 
 
 @pytest.fixture(scope="module")
