@@ -21,9 +21,10 @@ from engine.ccsm.ccs import CCS, build_ccs, check_contour, slice_area
 from engine.ccsm.regression import ScaleModel, fit_scale_model
 from engine.ccsm.spool import MemorySpool, Spool, in_batches
 from engine.errors import CCSMError
+from engine.geom.polyline import ring_areas
 from engine.parallel import local_pool, map_ordered
 from engine.params import BuildParams
-from engine.tolerances import MIN_VISIBLE_RING_SIDE_M, min_ring_area_for_scale
+from engine.tolerances import MIN_VISIBLE_RING_SIDE_M
 from engine.types import BadFeature, Contour, ContourSet
 
 #: Called with (contours done, contours in total) as the build goes.
@@ -76,9 +77,13 @@ def vanish_scale(ccs: CCS, model: ScaleModel) -> float:
     first = math.sqrt(area0) / MIN_VISIBLE_RING_SIDE_M
     if first <= model.source_scale:
         return first
-    for scale, t in zip(model.ladder, ccs.t_at_scale, strict=True):
-        if slice_area(ccs, float(t)) < min_ring_area_for_scale(float(scale)):
-            return float(scale)
+    # Every ladder slice at once: a ring of a few dozen vertices costs far more in per-call overhead than in
+    # arithmetic, and its 32 areas were a fifth of its build.
+    t = np.clip(np.asarray(ccs.t_at_scale, dtype=np.float64), 0.0, 1.0)[:, None, None]
+    slices = (1.0 - t) * ccs.base[:-1] + t * ccs.top[:-1]
+    small = np.flatnonzero(ring_areas(slices) < (MIN_VISIBLE_RING_SIDE_M * np.asarray(model.ladder)) ** 2)
+    if len(small):
+        return float(model.ladder[small[0]])
     return max(model.target_scale, math.sqrt(slice_area(ccs, 1.0)) / MIN_VISIBLE_RING_SIDE_M)
 
 
