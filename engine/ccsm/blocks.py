@@ -160,18 +160,65 @@ def spatial_blocks(
     key = cell[:, 1] * side + cell[:, 0]
     order = np.argsort(key, kind="stable")
     piece_boxes, first, last, owner, start = pieces.arrays()
-    geoms = shapely.box(piece_boxes[:, 0], piece_boxes[:, 1], piece_boxes[:, 2], piece_boxes[:, 3])
-    tree = shapely.STRtree(geoms)
+    buckets = _Buckets(piece_boxes)
     blocks = []
     for group in np.split(owned[order], np.flatnonzero(np.diff(key[order])) + 1):
         own = np.sort(group)
-        counts = start[own + 1] - start[own]
-        own_pieces = (
-            np.repeat(start[own], counts) + np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-        )
-        _, hit = tree.query(geoms[own_pieces])
-        blocks.append(_block(own, hit, first, last, owner))
+        own_pieces = _concatenated_ranges(start[own], start[own + 1] - start[own])
+        # A tree of the pieces near this block only: one tree of every piece of a big set would hold a
+        # geometry per piece at once (hundreds of MB at a few million vertices).
+        candidates = buckets.near(piece_boxes[own_pieces])
+        tree = shapely.STRtree(_boxes(piece_boxes[candidates]))
+        _, hit = tree.query(_boxes(piece_boxes[own_pieces]))
+        blocks.append(_block(own, candidates[hit], first, last, owner))
     return blocks
+
+
+def _boxes(boxes: NDArray[np.float64]) -> NDArray[np.object_]:
+    return shapely.box(boxes[:, 0], boxes[:, 1], boxes[:, 2], boxes[:, 3])
+
+
+def _concatenated_ranges(starts: NDArray[np.intp], counts: NDArray[np.intp]) -> NDArray[np.intp]:
+    """start[0] .. start[0] + counts[0] - 1, then the same for every start, as one array."""
+    offsets = np.cumsum(counts) - counts
+    return (np.repeat(starts, counts) + np.arange(counts.sum()) - np.repeat(offsets, counts)).astype(np.intp)
+
+
+#: Pieces per bucket of the grid that narrows a block's search to the pieces around it.
+PIECES_PER_BUCKET = 256
+
+
+class _Buckets:
+    """Pieces filed by the cells of a square grid their boxes overlap (a piece across a cell edge is in both)."""
+
+    def __init__(self, boxes: NDArray[np.float64]) -> None:
+        self.side = max(1, math.ceil(math.sqrt(len(boxes) / PIECES_PER_BUCKET)))
+        self.lo = boxes[:, :2].min(axis=0) if len(boxes) else np.zeros(2)
+        extent = (boxes[:, 2:].max(axis=0) - self.lo) if len(boxes) else np.ones(2)
+        self.cell = np.maximum(extent / self.side, 1e-9)
+        cells, piece = self._cells_of(boxes)
+        order = np.argsort(cells, kind="stable")
+        self.pieces = piece[order]
+        self.start = np.searchsorted(cells[order], np.arange(self.side * self.side + 1)).astype(np.intp)
+
+    def _cells_of(self, boxes: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """Every (cell, box index) pair of a cell a box overlaps."""
+        c0 = np.clip(np.floor((boxes[:, :2] - self.lo) / self.cell), 0, self.side - 1).astype(np.intp)
+        c1 = np.clip(np.floor((boxes[:, 2:] - self.lo) / self.cell), 0, self.side - 1).astype(np.intp)
+        nx, ny = c1[:, 0] - c0[:, 0] + 1, c1[:, 1] - c0[:, 1] + 1
+        counts = nx * ny
+        which = np.repeat(np.arange(len(boxes), dtype=np.intp), counts)
+        k = _concatenated_ranges(np.zeros(len(boxes), dtype=np.intp), counts)
+        ix = c0[which, 0] + k % nx[which]
+        iy = c0[which, 1] + k // nx[which]
+        return (iy * self.side + ix).astype(np.intp), which
+
+    def near(self, boxes: NDArray[np.float64]) -> NDArray[np.intp]:
+        """Sorted indices of the pieces filed in any cell that one of ``boxes`` overlaps."""
+        cells = np.unique(self._cells_of(boxes)[0])
+        return np.unique(
+            self.pieces[_concatenated_ranges(self.start[cells], self.start[cells + 1] - self.start[cells])]
+        )
 
 
 def _block(
