@@ -24,7 +24,7 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
-from engine.ccsm.spool import Spool
+from engine.ccsm.spool import Spool, surface_of
 from engine.ccsm.topology import InputTouches, new_contact_pairs, per_piece, piece_ranges
 from engine.parallel import map_ordered
 from engine.types import Coords
@@ -35,6 +35,9 @@ if TYPE_CHECKING:
 #: Contours per block on average: large enough that a block's check is worth a task, small enough that its
 #: surfaces are a small share of a big build's memory.
 BLOCK_CONTOURS = 1024
+
+#: Rows (about) per block: bounds a block's work and its worker's memory when contours are long.
+BLOCK_ROWS = 1 << 17
 
 #: Rebuilt contours per block when only they are checked again: small blocks keep each check to the rebuilt
 #: contours' surroundings.
@@ -151,15 +154,17 @@ def spatial_blocks(
     owned = np.arange(n, dtype=np.intp) if only is None else np.asarray(only, dtype=np.intp)
     if n == 0 or len(owned) == 0:
         return []
-    # The grid spans the owned contours only: a few rebuilt contours get small blocks of their own.
-    side = max(1, math.ceil(math.sqrt(len(owned) / max(1, per_block))))
+    # The grid spans the owned contours only: a few rebuilt contours get small blocks of their own. Cells are
+    # sized by rows too, so a block of long contours is no heavier for its worker than one of short ones.
+    piece_boxes, first, last, owner, start = pieces.arrays()
+    rows = int((start[owned + 1] - start[owned]).sum()) * INDEX_PIECE_SEGMENTS
+    side = max(1, math.ceil(math.sqrt(len(owned) / max(1, per_block))), math.ceil(math.sqrt(rows / BLOCK_ROWS)))
     centres = (boxes[owned, :2] + boxes[owned, 2:]) / 2
     lo = centres.min(axis=0)
     span = np.maximum(centres.max(axis=0) - lo, 1e-9)
     cell = np.minimum((((centres - lo) / span) * side).astype(np.intp), side - 1)
     key = cell[:, 1] * side + cell[:, 0]
     order = np.argsort(key, kind="stable")
-    piece_boxes, first, last, owner, start = pieces.arrays()
     buckets = _Buckets(piece_boxes)
     blocks = []
     for group in np.split(owned[order], np.flatnonzero(np.diff(key[order])) + 1):
@@ -248,11 +253,22 @@ def _block(
 
 
 def block_contacts(
-    near: Sequence[CCS], own: Sequence[int], ladder: NDArray[np.float64], steps: Sequence[int]
+    near: Sequence[CCS | bytes],
+    first: Sequence[int],
+    last: Sequence[int],
+    own: Sequence[int],
+    ladder: NDArray[np.float64],
+    steps: Sequence[int],
 ) -> set[tuple[int, int]]:
     """Pairs (i, j), i < j, of local indices (into ``near``) whose slices meet at some checked step, each with
-    an ``own`` surface in it."""
-    return new_contact_pairs(near, ladder, steps, set(own))
+    an ``own`` surface in it; each near surface is cut to its rows ``first[i]`` .. ``last[i]`` (-1: whole).
+    The surfaces come as the spool keeps them (:func:`~engine.ccsm.spool.surface_of`): they are opened and
+    cut here, in the worker."""
+    surfaces = []
+    for payload, f, la in zip(near, first, last, strict=True):
+        s = surface_of(payload)
+        surfaces.append(s if f < 0 else replace(s, base=s.base[f : la + 1], top=s.top[f : la + 1]))
+    return new_contact_pairs(surfaces, ladder, steps, set(own))
 
 
 def input_touches(spool: Spool) -> InputTouches:
@@ -275,12 +291,8 @@ def _block_tasks(
 ) -> Iterator[tuple[Any, ...]]:
     """One task per block, each block's surfaces read from the spool only when its task is sent."""
     for b in blocks:
-        surfaces = spool.get(b.near.tolist())
-        near = [
-            s if f < 0 else replace(s, base=s.base[f : la + 1], top=s.top[f : la + 1])
-            for s, f, la in zip(surfaces, b.first.tolist(), b.last.tolist(), strict=True)
-        ]
-        yield near, np.searchsorted(b.near, b.own).tolist(), ladder, steps
+        near = spool.get_payloads(b.near.tolist())
+        yield near, b.first.tolist(), b.last.tolist(), np.searchsorted(b.near, b.own).tolist(), ladder, steps
 
 
 def find_crossings_by_block(

@@ -8,6 +8,7 @@ and the store is written batch by batch from the spool. The method only knows th
 
 from __future__ import annotations
 
+import pickle
 from collections.abc import Iterator, Sequence
 from typing import Protocol
 
@@ -22,6 +23,9 @@ class Spool(Protocol):
 
     def get(self, indices: Sequence[int]) -> list[CCS]:
         """The surfaces numbered ``indices``, in that order."""
+
+    def get_payloads(self, indices: Sequence[int]) -> Sequence[CCS | bytes]:
+        """The same surfaces in the form they are kept, for a worker to open with :func:`surface_of`."""
 
     def close(self) -> None:
         """Free what the spool holds."""
@@ -39,8 +43,16 @@ class MemorySpool:
     def get(self, indices: Sequence[int]) -> list[CCS]:  # noqa: D102
         return [self._surfaces[int(i)] for i in indices]
 
+    def get_payloads(self, indices: Sequence[int]) -> list[CCS]:  # noqa: D102
+        return self.get(indices)
+
     def close(self) -> None:  # noqa: D102
         self._surfaces.clear()
+
+
+def surface_of(payload: CCS | bytes) -> CCS:
+    """A surface from what :meth:`Spool.get_payloads` gave (a pickle from a spool on disk)."""
+    return pickle.loads(payload) if isinstance(payload, bytes) else payload
 
 
 def in_batches(spool: Spool, count: int, size: int) -> Iterator[list[CCS]]:

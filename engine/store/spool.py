@@ -87,13 +87,18 @@ class DiskSpool:
             raise StoreError(f"the build's scratch file {self.path.name}: {exc}") from exc
 
     def get(self, indices: Sequence[int]) -> list[CCS]:  # noqa: D102
+        return [pickle.loads(blob) for blob in self.get_payloads(indices)]
+
+    def get_payloads(self, indices: Sequence[int]) -> list[bytes]:
+        """The surfaces numbered ``indices`` as stored (pickles): sent to a worker as they are, so this process
+        neither unpickles nor pickles them again (``engine.ccsm.spool.surface_of`` opens them there)."""
         wanted = [int(i) for i in indices]
-        found: dict[int, CCS] = {}
+        found: dict[int, bytes] = {}
         for start in range(0, len(wanted), READ_BATCH):
             batch = sorted(set(wanted[start : start + READ_BATCH]) - found.keys())
             marks = ",".join("?" * len(batch))
             for i, blob in self._con.execute(f"SELECT i, blob FROM surfaces WHERE i IN ({marks})", batch):
-                found[int(i)] = pickle.loads(blob)
+                found[int(i)] = blob
         missing = [i for i in wanted if i not in found]
         if missing:
             raise KeyError(f"surfaces not in the spool: {missing[:5]}")
