@@ -54,12 +54,26 @@ class Record:
 
     lat: dict[str, list[float]] = field(default_factory=lambda: defaultdict(list))
     status: dict[str, dict[int, int]] = field(default_factory=lambda: defaultdict(lambda: defaultdict(int)))
+    #: Per route label, (total, queue, render) seconds of each drawn tile, from its Server-Timing header.
+    timing: dict[str, list[tuple[float, float, float]]] = field(default_factory=lambda: defaultdict(list))
     lock: threading.Lock = field(default_factory=threading.Lock)
 
-    def add(self, label: str, seconds: float, status: int) -> None:
+    def add(self, label: str, seconds: float, status: int, server_timing: str | None = None) -> None:
         with self.lock:
             self.lat[label].append(seconds)
             self.status[label][status] += 1
+            if server_timing:
+                queue, render = parse_server_timing(server_timing)
+                self.timing[label].append((seconds, queue, render))
+
+
+def parse_server_timing(header: str) -> tuple[float, float]:
+    """(queue, render) seconds from ``Server-Timing: queue;dur=MS, render;dur=MS`` (app/routes/tiles.py)."""
+    durations = {}
+    for metric in header.split(","):
+        name, _, dur = metric.strip().partition(";dur=")
+        durations[name] = float(dur) / 1000
+    return durations.get("queue", 0.0), durations.get("render", 0.0)
 
 
 def sample_store() -> Path:
@@ -100,11 +114,13 @@ def loop(stop: threading.Event, client: httpx.Client, rec: Record, pick: Callabl
     while not stop.is_set():
         label, path = pick()
         t0 = time.perf_counter()
+        timing = None
         try:
-            status = client.get(path).status_code
+            r = client.get(path)
+            status, timing = r.status_code, r.headers.get("server-timing")
         except httpx.HTTPError:
             status = 0
-        rec.add(label, time.perf_counter() - t0, status)
+        rec.add(label, time.perf_counter() - t0, status, timing)
 
 
 def hostile_picker(base: str, center: tuple[float, float], rng: random.Random) -> Callable[[], tuple[str, str]]:
@@ -237,6 +253,23 @@ def report(title: str, rec: Record, seconds: float) -> None:
         )
 
 
+def breakdown(title: str, rec: Record, label: str) -> None:
+    """Where the time of ``label`` requests went: waiting for a render worker (queue), drawing (render), and
+    the rest (the event loop, the network, the client's own threads); over all of them and over the slowest
+    1 % (the tail the p99 measures)."""
+    rows = np.array(rec.timing.get(label, []), dtype=float).reshape(-1, 3) * 1000
+    if len(rows) == 0:
+        return
+    rest = rows[:, 0] - rows[:, 1] - rows[:, 2]
+    tail = rows[:, 0] >= np.percentile(rows[:, 0], 99)
+    print(f"  {title}, {label} ({len(rows)} drawn): "
+          f"queue p50 {np.percentile(rows[:, 1], 50):.1f} / p99 {np.percentile(rows[:, 1], 99):.1f} ms, "
+          f"render p50 {np.percentile(rows[:, 2], 50):.1f} / p99 {np.percentile(rows[:, 2], 99):.1f} ms, "
+          f"rest p50 {np.percentile(rest, 50):.1f} / p99 {np.percentile(rest, 99):.1f} ms; "
+          f"slowest 1 % ({tail.sum()}): mean total {rows[tail, 0].mean():.1f} = queue {rows[tail, 1].mean():.1f}"
+          f" + render {rows[tail, 2].mean():.1f} + rest {rest[tail].mean():.1f} ms")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=30.0, help="length of each phase")
@@ -262,6 +295,10 @@ def main() -> None:
         p_alone, p_mix = pct(alone.lat["ccsm z12 tile"], 99), pct(mixed.lat["ccsm z12 tile"], 99)
         print(f"\nccsm z12 p99: alone {p_alone:.1f} ms, under the mix {p_mix:.1f} ms "
               f"({p_mix / p_alone:.2f}x; goal <= 2x)")
+        print("where the plain tiles' time went (Server-Timing):")
+        breakdown("alone", alone, "ccsm z12 tile")
+        breakdown("mix", mixed, "ccsm z12 tile")
+        breakdown("mix", mixed, "morph tile")
         print(f"/healthz during the mix: {len(health)} polls, max {max(health) * 1000:.1f} ms, "
               f"p99 {pct(health, 99):.1f} ms (goal < 50 ms)")
     finally:
