@@ -37,6 +37,18 @@ LIGHT_NICENESS = 5
 #: keep their pace while whole-dataset and per-request simplifications run (a nice-10 process gets about a
 #: third of a nice-5 one's share of a busy core).
 HEAVY_NICENESS = 10
+
+
+def lower_priority(niceness: int) -> None:
+    """Add ``niceness`` to this process's; background work (``niceness`` at HEAVY_NICENESS or more: the heavy
+    lane, upload checks) also takes Linux's idle scheduling class, where it runs only on a core no other
+    process wants and gives the core up the moment a map tile's worker wakes (a nice process may finish its
+    time slice first), so it cannot lengthen a map tile's render by sharing its core."""
+    os.nice(niceness)
+    if niceness >= HEAVY_NICENESS and hasattr(os, "SCHED_IDLE"):
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+
+
 #: Niceness of the morph lane's workers: morph tiles are map tiles too (the plugin's), so they share the light
 #: lane's priority; their own lane is what keeps a plain tile from waiting behind them.
 MORPH_NICENESS = LIGHT_NICENESS
@@ -231,7 +243,7 @@ def worker_main(conn: Connection, config: RenderConfig, niceness: int = LIGHT_NI
     which stops its workers itself (so Ctrl-C does not print a traceback per worker).
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    os.nice(niceness)
+    lower_priority(niceness)
     worker = Worker.of(config)
     renderer_store = config.store_path
     warm(worker.renderer)

@@ -237,6 +237,45 @@ def run_phase(
     return rec, health, time.perf_counter() - t0
 
 
+def cpu_by_role(server_pid: int) -> dict[str, float]:
+    """CPU seconds used so far by the server's event loop, its render workers by niceness (light and morph
+    lanes +5, heavy lane +10), its other processes (upload checks, builds; with those that ended), and this
+    load generator (the clients' threads)."""
+    import psutil
+
+    server = psutil.Process(server_pid)
+    own = server.nice()
+    roles: dict[str, float] = defaultdict(float)
+    times = server.cpu_times()
+    roles["server (event loop)"] += times.user + times.system
+    roles["ended children (checks, builds)"] += times.children_user + times.children_system
+    for child in server.children(recursive=True):
+        try:
+            t = child.cpu_times()
+            added = child.nice() - own
+            if child.parent().pid == server_pid and "forkserver" in " ".join(child.cmdline()):
+                roles["ended children (checks, builds)"] += t.children_user + t.children_system
+                role = "fork server"
+            elif added == 5 and child.parent().pid != server_pid:
+                role = "render workers +5 (light, morph)"
+            elif added == 10 and child.parent().pid != server_pid:
+                role = "heavy workers and checks +10"
+            else:
+                role = "builds and others"
+            roles[role] += t.user + t.system
+        except psutil.Error:
+            continue
+    me = psutil.Process().cpu_times()
+    roles["load clients (this process)"] += me.user + me.system
+    return roles
+
+
+def report_cpu(before: dict[str, float], after: dict[str, float], seconds: float) -> None:
+    print("  CPU, cores used on average: " + ", ".join(
+        f"{role} {(after[role] - before.get(role, 0.0)) / seconds:.2f}" for role in sorted(after)
+    ))
+
+
 def pct(values: list[float], q: float) -> float:
     return float(np.percentile(np.array(values) * 1000, q)) if values else float("nan")
 
@@ -288,10 +327,14 @@ def main() -> None:
         print(f"server {base}, {args.workers} uvicorn worker(s); {len(tiles)} z12 tiles with contours; "
               f"{args.clients} plain clients, {args.hostile} hostile clients (niceness {args.client_niceness}), "
               f"{os.cpu_count()} cores")
+        cpu0 = cpu_by_role(server.proc.pid)
         alone, _, s_alone = run_phase(base, tiles, args, mix=False)
+        cpu1 = cpu_by_role(server.proc.pid)
         report("alone: plain ccsm z12 tiles", alone, s_alone)
+        report_cpu(cpu0, cpu1, s_alone)
         mixed, health, s_mix = run_phase(base, tiles, args, mix=True)
         report("mix: plain tiles + hostile requests", mixed, s_mix)
+        report_cpu(cpu1, cpu_by_role(server.proc.pid), s_mix)
         p_alone, p_mix = pct(alone.lat["ccsm z12 tile"], 99), pct(mixed.lat["ccsm z12 tile"], 99)
         print(f"\nccsm z12 p99: alone {p_alone:.1f} ms, under the mix {p_mix:.1f} ms "
               f"({p_mix / p_alone:.2f}x; goal <= 2x)")

@@ -11,6 +11,7 @@ worker waits for the 20 s deadline of the morph request.
 
 from __future__ import annotations
 
+import os
 import shutil
 import signal
 import threading
@@ -104,3 +105,12 @@ def test_a_plain_tile_is_answered_while_the_morph_worker_is_stuck(server):
     r = morph["response"]
     assert isinstance(r, httpx.Response) and r.status_code == 200 and r.content
     assert worker.is_running()  # the worker went on and answered; it was not replaced
+
+
+def test_background_workers_take_the_idle_scheduling_class(server):
+    """Map tiles' workers (light and morph lanes) stay in the normal class at niceness +5; the heavy lane runs
+    in Linux's idle class, so it gives a core up the moment a map tile's worker wants it."""
+    workers = render_workers(server)
+    own = psutil.Process(server.proc.pid).nice()
+    classes = sorted((w.nice() - own, os.sched_getscheduler(w.pid)) for w in workers)
+    assert classes == [(5, os.SCHED_OTHER), (5, os.SCHED_OTHER), (10, os.SCHED_IDLE)], classes
