@@ -10,7 +10,10 @@ length:
 
 Prints per route: requests, throughput, p50/p95/p99 and status counts; the p99 of the plain ccsm z12 tiles
 alone vs under the mix (goal: within 2x); and the largest ``/healthz`` latency seen during the mix, polled
-every 50 ms (goal: under 50 ms).
+every 50 ms (goal: under 50 ms). To tell why a tail is long, it also prints where the plain tiles' time
+went (from their ``Server-Timing`` header: waiting for a render worker, drawing, and the rest, i.e. the
+event loop, the network and the clients), over all of them and over the slowest 1 %, and the CPU each part
+of the server (event loop, render workers by niceness, checks and builds) and the clients used per phase.
 
 The load clients run on the same two cores as the server. ``--client-niceness 5`` runs their threads at the
 render workers' niceness, as if the clients were on other machines (as in a deployment): then the server's
@@ -248,13 +251,13 @@ def cpu_by_role(server_pid: int) -> dict[str, float]:
     roles: dict[str, float] = defaultdict(float)
     times = server.cpu_times()
     roles["server (event loop)"] += times.user + times.system
-    roles["ended children (checks, builds)"] += times.children_user + times.children_system
+    roles["ended processes (checks, builds, replaced workers)"] += times.children_user + times.children_system
     for child in server.children(recursive=True):
         try:
             t = child.cpu_times()
             added = child.nice() - own
             if child.parent().pid == server_pid and "forkserver" in " ".join(child.cmdline()):
-                roles["ended children (checks, builds)"] += t.children_user + t.children_system
+                roles["ended processes (checks, builds, replaced workers)"] += t.children_user + t.children_system
                 role = "fork server"
             elif added == 5 and child.parent().pid != server_pid:
                 role = "render workers +5 (light, morph)"
