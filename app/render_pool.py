@@ -194,7 +194,7 @@ class RenderPool:
             raise self._too_slow("no render worker became free", "") from None
         loop = asyncio.get_running_loop()
         worker.busy_since = time.monotonic()
-        waited = worker.busy_since - (deadline - self.timeout_s)
+        waited = worker.busy_since - (deadline - self.timeout_s)  # since the request arrived (run set the deadline)
         exchange = loop.run_in_executor(self._threads, _exchange, worker.conn, job, deadline - time.monotonic())
         try:
             status, value = await asyncio.shield(exchange)
