@@ -11,13 +11,15 @@ import json
 import logging
 import os
 import signal
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, replace
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
 from app.compression import gzip_body, worth_compressing
 from engine.errors import CCSMError, UnknownLayer
+from engine.serve.cache import LRUCache
 from engine.serve.relief import ReliefCache
 from engine.serve.renderer import Renderer, TileOptions
 from engine.serve.simplify import feature_collection
@@ -37,6 +39,21 @@ LIGHT_NICENESS = 5
 HEAVY_NICENESS = 10
 
 
+def lower_priority(niceness: int) -> None:
+    """Add ``niceness`` to this process's; background work (``niceness`` at HEAVY_NICENESS or more: the heavy
+    lane, upload checks) also takes Linux's idle scheduling class, where it runs only on a core no other
+    process wants and gives the core up the moment a map tile's worker wakes (a nice process may finish its
+    time slice first), so it cannot lengthen a map tile's render by sharing its core."""
+    os.nice(niceness)
+    if niceness >= HEAVY_NICENESS and hasattr(os, "SCHED_IDLE"):
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+
+
+#: Niceness of the morph lane's workers: morph tiles are map tiles too (the plugin's), so they share the light
+#: lane's priority; their own lane is what keeps a plain tile from waiting behind them.
+MORPH_NICENESS = LIGHT_NICENESS
+
+
 @dataclass(frozen=True)
 class RenderConfig:
     """What a worker needs from the settings (plain values: it crosses a process boundary)."""
@@ -46,6 +63,7 @@ class RenderConfig:
     contour_cache_bytes: int
     baseline_cache_entries: int
     wm_max_vertices: int
+    morph_cache_bytes: int = 0
 
 
 @dataclass(frozen=True)
@@ -102,29 +120,50 @@ class SimplifyJob:
 @dataclass(frozen=True)
 class Rendered:
     """A job's answer: the body (None for an empty tile), the scale it was drawn at, and whether the body is
-    gzipped."""
+    gzipped; with the seconds it waited for a worker and the seconds the worker spent on it (the pool fills
+    both; the tile routes send them as ``Server-Timing``, so a load test can tell queueing from work)."""
 
     body: bytes | None
     scale: float
     gzipped: bool = False
+    wait_s: float = 0.0
+    work_s: float = 0.0
 
 
 def compressed(rendered: Rendered) -> Rendered:
     """The answer with its body gzipped, when it is worth it."""
     if rendered.body is None or not worth_compressing(rendered.body):
         return rendered
-    return Rendered(gzip_body(rendered.body), rendered.scale, gzipped=True)
+    return replace(rendered, body=gzip_body(rendered.body), gzipped=True)
 
 
 Job = TileJob | MorphJob | HillshadeJob | SimplifyJob
 
 
+#: A morph tile's cache key: dataset, data version, z, x, y.
+MorphKey = tuple[str, int, int, int, int]
+
+
 @dataclass
 class Worker:
-    """What one worker keeps between jobs: its renderer (store, caches) and the shaded reliefs."""
+    """What one worker keeps between jobs: its renderer (store, caches), the shaded reliefs, and the morph
+    tiles it drew (a morph tile depends only on the dataset's data version and the tile, and its crossing
+    check is the slow part: decided once per version and tile, not per request)."""
 
     renderer: Renderer
     reliefs: ReliefCache
+    morph_tiles: LRUCache[MorphKey, Rendered]
+
+    @classmethod
+    def of(cls, config: RenderConfig, store_path: Path | None = None) -> Worker:
+        """A fresh worker state on ``store_path`` (default: the configured store)."""
+        morph_tiles: LRUCache[MorphKey, Rendered] = LRUCache(config.morph_cache_bytes, morph_tile_cost)
+        return cls(make_renderer(config, store_path), ReliefCache(), morph_tiles)
+
+
+def morph_tile_cost(rendered: Rendered) -> int:
+    """Bytes a cached morph tile holds (its body and some overhead)."""
+    return len(rendered.body or b"") + 256
 
 
 def make_renderer(config: RenderConfig, store_path: Path | None = None) -> Renderer:
@@ -145,8 +184,7 @@ def run_job(worker: Worker, job: Job) -> Rendered:
         tile = renderer.tile(job.dataset, job.z, job.x, job.y, zoom=job.zoom, method=job.method, t=job.t)
         return Rendered(tile.data, tile.scale)
     if isinstance(job, MorphJob):
-        tile = renderer.morph_tile(job.dataset, job.z, job.x, job.y)
-        return Rendered(tile.data, tile.scale)
+        return draw_morph(worker, job)
     if isinstance(job, HillshadeJob):
         return Rendered(draw_hillshade(worker, job), 0.0)
     result = simplify_dataset(
@@ -155,6 +193,20 @@ def run_job(worker: Worker, job: Job) -> Rendered:
     doc = feature_collection(result.contours, job.scale, job.method, dropped=result.dropped)
     doc["dataset"] = job.dataset
     return Rendered(json.dumps(doc, separators=(",", ":"), allow_nan=False).encode(), job.scale)
+
+
+def draw_morph(worker: Worker, job: MorphJob) -> Rendered:
+    """A morph tile, drawn once per data version of its dataset in this worker (then from its cache)."""
+    info, _ = worker.renderer.info(job.dataset)
+    key = (job.dataset, info.data_version, job.z, job.x, job.y)
+    cached = worker.morph_tiles.get(key)
+    if cached is not None:
+        return cached
+    tile = worker.renderer.morph_tile(job.dataset, job.z, job.x, job.y)
+    rendered = Rendered(tile.data, tile.scale)
+    if worker.morph_tiles.max_cost > 0:
+        worker.morph_tiles.put(key, rendered)
+    return rendered
 
 
 def draw_hillshade(worker: Worker, job: HillshadeJob) -> bytes | None:
@@ -191,8 +243,8 @@ def worker_main(conn: Connection, config: RenderConfig, niceness: int = LIGHT_NI
     which stops its workers itself (so Ctrl-C does not print a traceback per worker).
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    os.nice(niceness)
-    worker = Worker(make_renderer(config), ReliefCache())
+    lower_priority(niceness)
+    worker = Worker.of(config)
     renderer_store = config.store_path
     warm(worker.renderer)
     conn.send(("ready", None))
@@ -205,10 +257,12 @@ def worker_main(conn: Connection, config: RenderConfig, niceness: int = LIGHT_NI
             # The service moved to another store file (ccsm build --publish): its caches and data versions
             # belong to the old file, so the worker starts afresh on the new one.
             worker.renderer.store.close()
-            worker, renderer_store = Worker(make_renderer(config, job.store), ReliefCache()), job.store
+            worker, renderer_store = Worker.of(config, job.store), job.store
         try:
+            began = time.perf_counter()
             rendered = run_job(worker, job)
-            answer: tuple[str, Any] = ("ok", compressed(rendered) if getattr(job, "gzip", False) else rendered)
+            rendered = compressed(rendered) if getattr(job, "gzip", False) else rendered
+            answer: tuple[str, Any] = ("ok", replace(rendered, work_s=time.perf_counter() - began))
         except CCSMError as exc:  # a domain error: the server answers with its status and message
             answer = ("error", exc)
         except Exception as exc:  # a bug: the server answers 500; the traceback is only here, in the log

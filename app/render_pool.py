@@ -17,14 +17,14 @@ import multiprocessing
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
 from typing import Any
 
 from starlette.requests import Request
 
-from app.render_jobs import HEAVY_NICENESS, LIGHT_NICENESS, Job, RenderConfig, Rendered, worker_main
+from app.render_jobs import HEAVY_NICENESS, LIGHT_NICENESS, MORPH_NICENESS, Job, RenderConfig, Rendered, worker_main
 from app.settings import Settings
 from engine.errors import CCSMError
 
@@ -194,6 +194,7 @@ class RenderPool:
             raise self._too_slow("no render worker became free", "") from None
         loop = asyncio.get_running_loop()
         worker.busy_since = time.monotonic()
+        waited = worker.busy_since - (deadline - self.timeout_s)  # since the request arrived (run set the deadline)
         exchange = loop.run_in_executor(self._threads, _exchange, worker.conn, job, deadline - time.monotonic())
         try:
             status, value = await asyncio.shield(exchange)
@@ -214,7 +215,7 @@ class RenderPool:
         worker.busy_since = None
         self._idle.put_nowait(worker)
         if status == "ok":
-            return value  # type: ignore[no-any-return]
+            return replace(value, wait_s=waited)
         raise value
 
     def _settle_soon(self, worker: Worker, exchange: asyncio.Future[tuple[str, Any]]) -> None:
@@ -285,25 +286,32 @@ HEAVY_METHODS = frozenset({"dp", "wm", "vw"})
 
 @dataclass
 class RenderLanes:
-    """Two pools, so slow requests cannot hold up quick ones: ``light`` draws ccsm, original and morph
-    tiles (milliseconds each), ``heavy`` draws baseline tiles and ``/simplify`` (a whole dataset, or a
-    per-request simplifier). Each has its own workers, queue and deadline."""
+    """Three pools, so slow requests cannot hold up quick ones: ``light`` draws ccsm and original tiles
+    (milliseconds each), ``morph`` draws morph tiles (a morph tile checks every pair of its contours for a
+    crossing through the level: up to half a second on a dense tile, so a plain tile must not queue behind
+    one), ``heavy`` draws baseline tiles and ``/simplify`` (a whole dataset, or a per-request simplifier).
+    Each has its own workers, queue and deadline."""
 
     light: RenderPool
     heavy: RenderPool
+    morph: RenderPool
 
     def for_tile(self, method: str) -> RenderPool:
         """The lane of a tile drawn with ``method``."""
         return self.heavy if method in HEAVY_METHODS else self.light
 
+    def all(self) -> tuple[RenderPool, ...]:
+        """Every lane."""
+        return (self.light, self.morph, self.heavy)
+
     async def start(self) -> None:
-        """Start both lanes' workers (they warm up side by side)."""
-        await asyncio.gather(self.light.start(), self.heavy.start())
+        """Start every lane's workers (they warm up side by side)."""
+        await asyncio.gather(*(lane.start() for lane in self.all()))
 
     async def close(self) -> None:
         """Stop every worker."""
-        await self.light.close()
-        await self.heavy.close()
+        for lane in self.all():
+            await lane.close()
 
 
 def render_lanes_for(settings: Settings) -> RenderLanes:
@@ -313,6 +321,7 @@ def render_lanes_for(settings: Settings) -> RenderLanes:
     return RenderLanes(
         light=RenderPool(config, settings.render_workers, queue, timeout),
         heavy=RenderPool(config, settings.heavy_render_workers, queue, timeout, HEAVY_NICENESS),
+        morph=RenderPool(config, settings.morph_render_workers, queue, timeout, MORPH_NICENESS),
     )
 
 
@@ -331,6 +340,7 @@ def render_config_for(settings: Settings) -> RenderConfig:
         contour_cache_bytes=settings.contour_cache_mb << 20,
         baseline_cache_entries=settings.baseline_cache_entries,
         wm_max_vertices=settings.wm_max_vertices,
+        morph_cache_bytes=settings.morph_cache_mb << 20,
     )
 
 

@@ -87,10 +87,20 @@ class Settings(BaseSettings):
 
     # -- load: CPU work off the event loop (docs/service.md, "Under load") -------------------------------
     render_workers: int = Field(
-        2, ge=1, le=64, description="Worker processes drawing ccsm, original and morph tiles, per server process."
+        2, ge=1, le=64, description="Worker processes drawing ccsm and original tiles, per server process."
     )
     heavy_render_workers: int = Field(
         1, ge=1, le=64, description="Worker processes for baseline tiles (dp, wm, vw) and /simplify."
+    )
+    morph_render_workers: int = Field(
+        1,
+        ge=1,
+        le=64,
+        description="Worker processes drawing morph tiles, per server process: a lane of their own, so a plain "
+        "tile never waits behind a slow morph tile.",
+    )
+    morph_cache_mb: int = Field(
+        64, ge=0, description="Morph tiles kept per morph worker process, MB (0: none); per data version."
     )
     render_queue: int = Field(
         8, ge=0, description="Requests that may wait for a busy render worker, per lane; beyond it: 503 at once."

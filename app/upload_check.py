@@ -17,7 +17,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
-from app.render_jobs import HEAVY_NICENESS
+from app.render_jobs import HEAVY_NICENESS, lower_priority
 from engine.cartography.options import CartographyOptions, check_schedule_fits
 from engine.errors import CCSMError
 from engine.io.source import read_source
@@ -105,7 +105,7 @@ def checker_main(conn: Connection, job: UploadCheck) -> None:
     """The check process: one check, its answer ``("ok", CheckedUpload)`` or ``("error", exception)`` on
     the pipe, then exit (its memory returns to the system). SIGINT is left to the server."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    os.nice(HEAVY_NICENESS)  # the event loop and map tiles first when the cores are busy
+    lower_priority(HEAVY_NICENESS)  # the event loop and map tiles first when the cores are busy
     try:
         answer: tuple[str, Any] = ("ok", check_upload(job))
     except CCSMError as exc:  # bad input: the server answers 4xx with the message

@@ -10,7 +10,10 @@ length:
 
 Prints per route: requests, throughput, p50/p95/p99 and status counts; the p99 of the plain ccsm z12 tiles
 alone vs under the mix (goal: within 2x); and the largest ``/healthz`` latency seen during the mix, polled
-every 50 ms (goal: under 50 ms).
+every 50 ms (goal: under 50 ms). To tell why a tail is long, it also prints where the plain tiles' time
+went (from their ``Server-Timing`` header: waiting for a render worker, drawing, and the rest, i.e. the
+event loop, the network and the clients), over all of them and over the slowest 1 %, and the CPU each part
+of the server (event loop, render workers by niceness, checks and builds) and the clients used per phase.
 
 The load clients run on the same two cores as the server. ``--client-niceness 5`` runs their threads at the
 render workers' niceness, as if the clients were on other machines (as in a deployment): then the server's
@@ -54,12 +57,26 @@ class Record:
 
     lat: dict[str, list[float]] = field(default_factory=lambda: defaultdict(list))
     status: dict[str, dict[int, int]] = field(default_factory=lambda: defaultdict(lambda: defaultdict(int)))
+    #: Per route label, (total, queue, render) seconds of each drawn tile, from its Server-Timing header.
+    timing: dict[str, list[tuple[float, float, float]]] = field(default_factory=lambda: defaultdict(list))
     lock: threading.Lock = field(default_factory=threading.Lock)
 
-    def add(self, label: str, seconds: float, status: int) -> None:
+    def add(self, label: str, seconds: float, status: int, server_timing: str | None = None) -> None:
         with self.lock:
             self.lat[label].append(seconds)
             self.status[label][status] += 1
+            if server_timing:
+                queue, render = parse_server_timing(server_timing)
+                self.timing[label].append((seconds, queue, render))
+
+
+def parse_server_timing(header: str) -> tuple[float, float]:
+    """(queue, render) seconds from ``Server-Timing: queue;dur=MS, render;dur=MS`` (app/routes/tiles.py)."""
+    durations = {}
+    for metric in header.split(","):
+        name, _, dur = metric.strip().partition(";dur=")
+        durations[name] = float(dur) / 1000
+    return durations.get("queue", 0.0), durations.get("render", 0.0)
 
 
 def sample_store() -> Path:
@@ -100,11 +117,13 @@ def loop(stop: threading.Event, client: httpx.Client, rec: Record, pick: Callabl
     while not stop.is_set():
         label, path = pick()
         t0 = time.perf_counter()
+        timing = None
         try:
-            status = client.get(path).status_code
+            r = client.get(path)
+            status, timing = r.status_code, r.headers.get("server-timing")
         except httpx.HTTPError:
             status = 0
-        rec.add(label, time.perf_counter() - t0, status)
+        rec.add(label, time.perf_counter() - t0, status, timing)
 
 
 def hostile_picker(base: str, center: tuple[float, float], rng: random.Random) -> Callable[[], tuple[str, str]]:
@@ -221,6 +240,45 @@ def run_phase(
     return rec, health, time.perf_counter() - t0
 
 
+def cpu_by_role(server_pid: int) -> dict[str, float]:
+    """CPU seconds used so far by the server's event loop, its render workers by niceness (light and morph
+    lanes +5, heavy lane +10), its other processes (upload checks, builds; with those that ended), and this
+    load generator (the clients' threads)."""
+    import psutil
+
+    server = psutil.Process(server_pid)
+    own = server.nice()
+    roles: dict[str, float] = defaultdict(float)
+    times = server.cpu_times()
+    roles["server (event loop)"] += times.user + times.system
+    roles["ended processes (checks, builds, replaced workers)"] += times.children_user + times.children_system
+    for child in server.children(recursive=True):
+        try:
+            t = child.cpu_times()
+            added = child.nice() - own
+            if child.parent().pid == server_pid and "forkserver" in " ".join(child.cmdline()):
+                roles["ended processes (checks, builds, replaced workers)"] += t.children_user + t.children_system
+                role = "fork server"
+            elif added == 5 and child.parent().pid != server_pid:
+                role = "render workers +5 (light, morph)"
+            elif added == 10 and child.parent().pid != server_pid:
+                role = "heavy workers and checks +10"
+            else:
+                role = "builds and others"
+            roles[role] += t.user + t.system
+        except psutil.Error:
+            continue
+    me = psutil.Process().cpu_times()
+    roles["load clients (this process)"] += me.user + me.system
+    return roles
+
+
+def report_cpu(before: dict[str, float], after: dict[str, float], seconds: float) -> None:
+    print("  CPU, cores used on average: " + ", ".join(
+        f"{role} {(after[role] - before.get(role, 0.0)) / seconds:.2f}" for role in sorted(after)
+    ))
+
+
 def pct(values: list[float], q: float) -> float:
     return float(np.percentile(np.array(values) * 1000, q)) if values else float("nan")
 
@@ -235,6 +293,23 @@ def report(title: str, rec: Record, seconds: float) -> None:
             f"  {label:30s} {len(lat):6d} {len(lat) / seconds:7.1f} {pct(lat, 50):8.1f} {pct(lat, 95):8.1f} "
             f"{pct(lat, 99):8.1f}  {codes}"
         )
+
+
+def breakdown(title: str, rec: Record, label: str) -> None:
+    """Where the time of ``label`` requests went: waiting for a render worker (queue), drawing (render), and
+    the rest (the event loop, the network, the client's own threads); over all of them and over the slowest
+    1 % (the tail the p99 measures)."""
+    rows = np.array(rec.timing.get(label, []), dtype=float).reshape(-1, 3) * 1000
+    if len(rows) == 0:
+        return
+    rest = rows[:, 0] - rows[:, 1] - rows[:, 2]
+    tail = rows[:, 0] >= np.percentile(rows[:, 0], 99)
+    print(f"  {title}, {label} ({len(rows)} drawn): "
+          f"queue p50 {np.percentile(rows[:, 1], 50):.1f} / p99 {np.percentile(rows[:, 1], 99):.1f} ms, "
+          f"render p50 {np.percentile(rows[:, 2], 50):.1f} / p99 {np.percentile(rows[:, 2], 99):.1f} ms, "
+          f"rest p50 {np.percentile(rest, 50):.1f} / p99 {np.percentile(rest, 99):.1f} ms; "
+          f"slowest 1 % ({tail.sum()}): mean total {rows[tail, 0].mean():.1f} = queue {rows[tail, 1].mean():.1f}"
+          f" + render {rows[tail, 2].mean():.1f} + rest {rest[tail].mean():.1f} ms")
 
 
 def main() -> None:
@@ -255,13 +330,21 @@ def main() -> None:
         print(f"server {base}, {args.workers} uvicorn worker(s); {len(tiles)} z12 tiles with contours; "
               f"{args.clients} plain clients, {args.hostile} hostile clients (niceness {args.client_niceness}), "
               f"{os.cpu_count()} cores")
+        cpu0 = cpu_by_role(server.proc.pid)
         alone, _, s_alone = run_phase(base, tiles, args, mix=False)
+        cpu1 = cpu_by_role(server.proc.pid)
         report("alone: plain ccsm z12 tiles", alone, s_alone)
+        report_cpu(cpu0, cpu1, s_alone)
         mixed, health, s_mix = run_phase(base, tiles, args, mix=True)
         report("mix: plain tiles + hostile requests", mixed, s_mix)
+        report_cpu(cpu1, cpu_by_role(server.proc.pid), s_mix)
         p_alone, p_mix = pct(alone.lat["ccsm z12 tile"], 99), pct(mixed.lat["ccsm z12 tile"], 99)
         print(f"\nccsm z12 p99: alone {p_alone:.1f} ms, under the mix {p_mix:.1f} ms "
               f"({p_mix / p_alone:.2f}x; goal <= 2x)")
+        print("where the plain tiles' time went (Server-Timing):")
+        breakdown("alone", alone, "ccsm z12 tile")
+        breakdown("mix", mixed, "ccsm z12 tile")
+        breakdown("mix", mixed, "morph tile")
         print(f"/healthz during the mix: {len(health)} polls, max {max(health) * 1000:.1f} ms, "
               f"p99 {pct(health, 99):.1f} ms (goal < 50 ms)")
     finally:

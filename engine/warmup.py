@@ -40,6 +40,7 @@ def warm_up() -> float:
 def _check_tile_topology() -> None:
     """The kernels that keep served lines from crossing (docs/design.md section 4.8): the grid crossing check,
     snap rounding and the morph check, on two lines that cross."""
+    from engine.tiles.clip import clip_lines_exact
     from engine.tiles.crossings import crossing_owner_pairs
     from engine.tiles.morph_crossings import morph_crossing_pairs
     from engine.tiles.snap_round import snap_round
@@ -48,12 +49,14 @@ def _check_tile_topology() -> None:
     end = np.array([[0, 0], [10, 0], [4, -1], [6, 3]], dtype=np.int64)
     part_len, owner = np.array([2, 2], dtype=np.int64), np.array([0, 1], dtype=np.int64)
     crossing_owner_pairs(end, part_len, owner)
+    clip_lines_exact(end.astype(np.float64), part_len, 1.0, 9.0)  # exact lines cut before snap rounding
     snap_round(end.astype(np.float64), part_len)
     morph_crossing_pairs(start, end, part_len, owner, np.array([[0.0, 0.0], [0.0, 0.5], [0.0, 1.0]]))
 
 
 def _render_one_tile(ring: np.ndarray, line: np.ndarray) -> None:
-    """Build two contours into a throwaway store and draw a tile: compiles the tile path's kernels."""
+    """Build two contours into a throwaway store and draw a tile and a morph tile: compiles the kernels of
+    both tile paths."""
     import tempfile
     from pathlib import Path
 
@@ -77,6 +80,7 @@ def _render_one_tile(ring: np.ndarray, line: np.ndarray) -> None:
             renderer = Renderer(store)
             for method in ("ccsm", "original"):
                 renderer.tile("warmup", z, x, y, zoom=z + 0.5 if method == "ccsm" else None, method=method)
+            renderer.morph_tile("warmup", z, x, y)  # its own kernels (morph runs), else compiled on first use
         finally:
             store.close()
 

@@ -12,7 +12,7 @@ from fastapi.responses import JSONResponse
 from app.dependencies import TileQuery, get_service, get_settings
 from app.disconnect import unless_client_goes
 from app.public_url import public_base_url
-from app.render_jobs import MorphJob, TileJob
+from app.render_jobs import MorphJob, Rendered, TileJob
 from app.render_pool import RenderLanes, get_render_lanes
 from app.responses import accepts_gzip, body_response, etag_matches, make_etag
 from app.service import DatasetService, lonlat_bounds
@@ -89,6 +89,7 @@ async def get_tile(
     job = TileJob(dataset, z, x, y, zoom, q.method, t, store=service.settings.store_path, gzip=gz)
     result = await unless_client_goes(request, lanes.for_tile(q.method).run(job))
     headers["X-Tile-Scale"] = f"{result.scale:.1f}"
+    headers["Server-Timing"] = server_timing(result)
     if result.body is None:
         return Response(status_code=204, headers=headers)
     return body_response(request, result.body, MVT_MEDIA_TYPE, headers, gzipped=result.gzipped)
@@ -130,10 +131,17 @@ async def get_morph_tile(
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
     job = MorphJob(dataset, z, x, y, store=service.settings.store_path, gzip=gz)
-    result = await unless_client_goes(request, lanes.light.run(job))
+    result = await unless_client_goes(request, lanes.morph.run(job))
+    headers["Server-Timing"] = server_timing(result)
     if result.body is None:
         return Response(status_code=204, headers=headers)
     return body_response(request, result.body, MVT_MEDIA_TYPE, headers, gzipped=result.gzipped)
+
+
+def server_timing(result: Rendered) -> str:
+    """The ``Server-Timing`` header of a drawn tile: milliseconds it waited for a render worker (``queue``)
+    and the worker spent drawing it (``render``), so a load test can tell queueing from work."""
+    return f"queue;dur={result.wait_s * 1000:.1f}, render;dur={result.work_s * 1000:.1f}"
 
 
 @router.get("/tiles/{dataset}/tilejson.json", name="get_tilejson")

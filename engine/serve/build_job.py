@@ -167,6 +167,8 @@ def main() -> None:
     """Entry point: one JSON job on stdin."""
     _die_with_parent()
     os.nice(BUILD_NICENESS)
+    if hasattr(os, "SCHED_IDLE"):  # a core no map tile wants (as app.render_jobs.lower_priority)
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     sys.exit(run(BuildJob.from_json(sys.stdin.readline())))
 

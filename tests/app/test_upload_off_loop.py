@@ -239,6 +239,6 @@ def test_issue_10_workers_yield_the_cores_to_the_event_loop(server):
     workers = forked_children(server)
     added = sorted(psutil.Process(pid).nice() - own for pid in workers)
     defaults = {name: field.default for name, field in Settings.model_fields.items()}
-    light, heavy = defaults["render_workers"], defaults["heavy_render_workers"]
+    light, heavy = defaults["render_workers"] + defaults["morph_render_workers"], defaults["heavy_render_workers"]
     capped = [min(own + n, 19) - own for n in (5, 10)]  # 19 is the nicest there is
     assert added == [capped[0]] * light + [capped[1]] * heavy, (own, added)
