@@ -103,22 +103,33 @@ def datasets(sizes: list[int]) -> list[tuple[str, str, Path, float]]:
 
 
 def build_one(path: Path, interval: float, workers: int) -> dict[str, float]:
-    """Build one DEM into a fresh store (this process); the numbers as a dict."""
+    """Build one DEM into a fresh store (this process); the numbers as a dict.
+
+    The phases are timed by wrapping the functions that do them (nothing else changes); the peak memory is read
+    right after the build, before the tiles are timed (the renderer then loads the whole dataset to serve it).
+    """
     import engine.ccsm.build as build_module
+    import engine.serve.datasets as datasets_module
     from engine.serve.datasets import SourceSpec, build_dataset
     from engine.store.sqlite import CCSStore
 
-    repair_s = [0.0]
-    resolve = build_module.resolve_crossings
+    phase_s = {"read": 0.0, "repair": 0.0, "write": 0.0}
+    peak_mb = {}  # the build process's peak RSS when each phase ended
 
-    def timed_resolve(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202 - times the repair, changes nothing
-        t0 = time.perf_counter()
-        try:
-            return resolve(*args, **kwargs)
-        finally:
-            repair_s[0] += time.perf_counter() - t0
+    def timed(phase: str, fn):  # noqa: ANN001, ANN202 - wraps any function, changes nothing
+        def wrapper(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+            t0 = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                phase_s[phase] += time.perf_counter() - t0
+                peak_mb[phase] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
-    build_module.resolve_crossings = timed_resolve
+        return wrapper
+
+    build_module.resolve_crossings = timed("repair", build_module.resolve_crossings)
+    datasets_module.read_source = timed("read", datasets_module.read_source)
+    CCSStore.save = timed("write", CCSStore.save)  # type: ignore[method-assign]
     store_path = WORK / f"{path.stem}-{interval:g}.sqlite"
     for stale in WORK.glob(f"{store_path.name}*"):
         stale.unlink()
@@ -131,15 +142,20 @@ def build_one(path: Path, interval: float, workers: int) -> dict[str, float]:
     with build_executor(None, workers) as executor:
         info, _ = build_dataset(store, spec, workers=workers, executor=executor, force=True)
     seconds = time.perf_counter() - t0
+    rss_main = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    rss_worker = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
     store.close()
     p50, p95 = tile_times(store_path)
     return {
         "contours": info.n_contours,
         "vertices": info.n_vertices,
         "seconds": seconds,
-        "repair_s": repair_s[0],
-        "rss_main_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-        "rss_worker_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024,
+        "read_s": phase_s["read"],
+        "repair_s": phase_s["repair"],
+        "write_s": phase_s["write"],
+        "rss_main_mb": rss_main,
+        "rss_read_mb": peak_mb.get("read", 0.0),
+        "rss_worker_mb": rss_worker,
         "store_mb": store_path.stat().st_size / 1e6,
         "tile_p50_ms": p50,
         "tile_p95_ms": p95,
@@ -193,10 +209,15 @@ def main() -> None:
         print(json.dumps(build_one(args.one, args.interval, args.workers)))
         return
     sizes = [int(s) for s in args.sizes.split(",")]
-    print(f"{args.workers} build workers; sample-relative sizes in vertices; times on a shared machine")
+    print(
+        f"{args.workers} build workers; sizes relative to the 1x terrain's vertices; read / repair / write: shares "
+        "of the build time; RSS: peak of the build process once the source is read and after the build, and of its "
+        "largest worker (MB, before the tiles are timed)"
+    )
     header = (
-        f"{'series':7} {'data':11} {'contours':>8} {'vertices':>9} {'build s':>8} {'repair':>7} "
-        f"{'vert/s/core':>11} {'µs/vertex':>9} {'RSS main':>8} {'RSS wkr':>8} {'store MB':>8} "
+        f"{'series':7} {'data':11} {'contours':>8} {'vertices':>9} {'build s':>8} {'read':>5} {'repair':>6} "
+        f"{'write':>5} {'vert/s/core':>11} {'µs/vertex':>9} {'RSS read':>8} {'RSS main':>8} {'RSS wkr':>8} "
+        f"{'store MB':>8} "
         f"{'tile p50':>8} {'p95 ms':>7}"
     )
     print(header)
@@ -208,8 +229,9 @@ def main() -> None:
         per_core = r["vertices"] / r["seconds"] / args.workers
         print(
             f"{series:7} {label:11} {r['contours']:8.0f} {r['vertices']:9.0f} {r['seconds']:8.1f} "
-            f"{r['repair_s'] / r['seconds']:6.0%} {per_core:11.0f} {1e6 / per_core:9.1f} "
-            f"{r['rss_main_mb']:8.0f} {r['rss_worker_mb']:8.0f} {r['store_mb']:8.1f} "
+            f"{r['read_s'] / r['seconds']:5.0%} {r['repair_s'] / r['seconds']:6.0%} {r['write_s'] / r['seconds']:5.0%} "
+            f"{per_core:11.0f} {1e6 / per_core:9.1f} "
+            f"{r['rss_read_mb']:8.0f} {r['rss_main_mb']:8.0f} {r['rss_worker_mb']:8.0f} {r['store_mb']:8.1f} "
             f"{r['tile_p50_ms']:8.2f} {r['tile_p95_ms']:7.2f}",
             flush=True,
         )

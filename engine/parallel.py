@@ -8,7 +8,8 @@ through ``distributed.Client.get_executor()``, which is such an executor too.
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterator
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from contextlib import contextmanager
 from functools import partial
@@ -75,16 +76,31 @@ def dask_executor(address: str) -> Iterator[Executor]:
         client.close()
 
 
-def map_ordered(executor: Executor | None, fn: Callable[..., R], tasks: list[tuple[Any, ...]]) -> Iterator[R]:
-    """``fn(*task)`` for every task, yielded in the tasks' order; in this process when ``executor`` is None."""
+#: Tasks of :func:`map_ordered` submitted ahead of the one being read: enough to keep every worker busy, few
+#: enough that the inputs and results in flight stay a small, fixed share of a big build's memory.
+AHEAD = 8
+
+
+def map_ordered(
+    executor: Executor | None, fn: Callable[..., R], tasks: Iterable[tuple[Any, ...]], ahead: int = AHEAD
+) -> Iterator[R]:
+    """``fn(*task)`` for every task, yielded in the tasks' order; in this process when ``executor`` is None.
+
+    ``tasks`` is read lazily and at most ``ahead`` tasks are submitted and not yet yielded, so a generator of
+    tasks that loads each task's data (a block's surfaces from a spool) holds only that many at once.
+    """
     if executor is None:
         with threadpool_limits(1):
             for task in tasks:
                 yield fn(*task)
         return
-    futures = [executor.submit(fn, *task) for task in tasks]
-    for fut in futures:
-        yield fut.result()
+    pending: deque[Future[R]] = deque()
+    for task in tasks:
+        pending.append(executor.submit(fn, *task))
+        if len(pending) >= ahead:
+            yield pending.popleft().result()
+    while pending:
+        yield pending.popleft().result()
 
 
 def cores() -> int:

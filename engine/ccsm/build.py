@@ -7,21 +7,24 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor
-from contextlib import nullcontext
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
+from engine.ccsm.blocks import PieceIndex, find_crossings_by_block, input_touches
 from engine.ccsm.ccs import CCS, build_ccs, check_contour, slice_area
 from engine.ccsm.regression import ScaleModel, fit_scale_model
-from engine.ccsm.topology import INPUT_TOUCH_M, crossing_pairs, find_new_crossings
+from engine.ccsm.spool import MemorySpool, Spool, in_batches
 from engine.errors import CCSMError
-from engine.parallel import local_pool
+from engine.geom.polyline import ring_areas
+from engine.parallel import local_pool, map_ordered
 from engine.params import BuildParams
-from engine.tolerances import MIN_VISIBLE_RING_SIDE_M, min_ring_area_for_scale
+from engine.tolerances import MIN_VISIBLE_RING_SIDE_M
 from engine.types import BadFeature, Contour, ContourSet
 
 #: Called with (contours done, contours in total) as the build goes.
@@ -74,9 +77,13 @@ def vanish_scale(ccs: CCS, model: ScaleModel) -> float:
     first = math.sqrt(area0) / MIN_VISIBLE_RING_SIDE_M
     if first <= model.source_scale:
         return first
-    for scale, t in zip(model.ladder, ccs.t_at_scale, strict=True):
-        if slice_area(ccs, float(t)) < min_ring_area_for_scale(float(scale)):
-            return float(scale)
+    # Every ladder slice at once: a ring of a few dozen vertices costs far more in per-call overhead than in
+    # arithmetic, and its 32 areas were a fifth of its build.
+    t = np.clip(np.asarray(ccs.t_at_scale, dtype=np.float64), 0.0, 1.0)[:, None, None]
+    slices = (1.0 - t) * ccs.base[:-1] + t * ccs.top[:-1]
+    small = np.flatnonzero(ring_areas(slices) < (MIN_VISIBLE_RING_SIDE_M * np.asarray(model.ladder)) ** 2)
+    if len(small):
+        return float(model.ladder[small[0]])
     return max(model.target_scale, math.sqrt(slice_area(ccs, 1.0)) / MIN_VISIBLE_RING_SIDE_M)
 
 
@@ -102,12 +109,43 @@ def _build_chunk(
     return out
 
 
+def _pool(executor: Executor | None, workers: int, chunks: int) -> AbstractContextManager[Executor | None]:
+    """Where a build's tasks run: the given executor, a local pool of ``workers``, or this process (None)."""
+    if executor is not None:
+        return nullcontext(executor)
+    if workers == 1 or chunks <= 1:
+        return nullcontext(None)
+    return local_pool(workers)
+
+
 def default_workers() -> int:
     """Worker processes: one per core the process may use."""
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - not Linux
         return max(1, os.cpu_count() or 1)
+
+
+@dataclass
+class SpooledSet:
+    """A built set whose surfaces are in a spool (:mod:`engine.ccsm.spool`), numbered 0 .. ``count`` - 1 in
+    input order: what :func:`build_into` returns, to be written batch by batch. The other attributes are
+    those of :class:`BuiltSet`."""
+
+    spool: Spool
+    count: int
+    model: ScaleModel
+    params: BuildParams
+    working_crs: str
+    source_crs: str
+    bad_features: list[BadFeature]
+    name: str
+    interval: float | None
+    repaired: int
+
+    def surfaces_in_batches(self, size: int) -> Iterator[list[CCS]]:
+        """The surfaces in input order, ``size`` at a time (only one batch is read into memory)."""
+        return in_batches(self.spool, self.count, size)
 
 
 def build_contour_set(
@@ -118,10 +156,48 @@ def build_contour_set(
     progress: ProgressCallback | None = None,
     executor: Executor | None = None,
 ) -> BuiltSet:
-    """Build the CCS of every contour of ``contour_set``.
+    """Build the CCS of every contour of ``contour_set``, in memory (:func:`build_into` with a memory spool).
+
+    Parameters and the build are those of :func:`build_into`.
+
+    Returns
+    -------
+    BuiltSet
+        Contours that could not be built are listed in ``bad_features`` with the reason; the rest are built.
+    """
+    spooled = build_into(MemorySpool(), contour_set, params, workers=workers, progress=progress, executor=executor)
+    return BuiltSet(
+        surfaces=spooled.spool.get(range(spooled.count)),
+        model=spooled.model,
+        params=spooled.params,
+        working_crs=spooled.working_crs,
+        source_crs=spooled.source_crs,
+        bad_features=spooled.bad_features,
+        name=spooled.name,
+        interval=spooled.interval,
+        repaired=spooled.repaired,
+    )
+
+
+def build_into(
+    spool: Spool,
+    contour_set: ContourSet,
+    params: BuildParams | None = None,
+    *,
+    workers: int | None = None,
+    progress: ProgressCallback | None = None,
+    executor: Executor | None = None,
+) -> SpooledSet:
+    """Build the CCS of every contour of ``contour_set`` into ``spool``, then repair crossings block by block.
+
+    Surfaces go to the spool as their chunks come back, and the repair reads one block's surfaces at a time,
+    so with a :class:`~engine.ccsm.spool.DiskSpool` the build holds the input contours and a few chunks and
+    blocks, not every surface (docs/design.md section 6).
 
     Parameters
     ----------
+    spool
+        Where the surfaces go, numbered in input order of the contours that could be built.
     contour_set
         Contours in a metric working CRS.
     params
@@ -131,83 +207,88 @@ def build_contour_set(
     progress
         Called with (done, total) after each chunk.
     executor
-        Where the chunks are built (a Dask cluster, see :mod:`engine.parallel`); None = a local pool of
-        ``workers`` processes, or this process.
-
-    Returns
-    -------
-    BuiltSet
-        Contours that could not be built are listed in ``bad_features`` with the reason; the rest are built.
+        Where the chunks, the blocks' checks and the rebuilds run (a Dask cluster, see :mod:`engine.parallel`);
+        None = a local pool of ``workers`` processes, or this process.
     """
     params = params or BuildParams()
-    # Check every contour first: one unusable contour must not break the grouping of the others.
-    contours = []
-    rejected: list[BadFeature] = []
-    for contour in contour_set.contours:
-        try:
-            check_contour(contour)
-        except CCSMError as exc:
-            rejected.append(BadFeature(contour.id, str(exc)))
-        else:
-            contours.append(contour)
+    contours, rejected = _usable(contour_set.contours)
     model, labels = fit_scale_model(contours, params)
     workers = default_workers() if workers is None else max(1, workers)
-    chunks = [
-        (contours[i : i + CHUNK], labels[i : i + CHUNK].tolist()) for i in range(0, len(contours), CHUNK)
-    ]
-    results: list[CCS | BadFeature] = []
-    done = 0
+    starts = range(0, len(contours), CHUNK)
+    tasks = ((contours[i : i + CHUNK], labels[i : i + CHUNK].tolist(), params, model) for i in starts)
+    built: list[int] = []  # index into ``contours`` of each surface, by its number in the spool
+    boxes: list[tuple[float, float, float, float]] = []
+    pieces = PieceIndex()  # the surfaces' pieces, for the repair's blocks
+    failed: list[BadFeature] = []
     total = len(contours)  # contours that passed the check; the rejected ones are reported, not built
     if progress:
         progress(0, total)
-    if executor is None and (workers == 1 or len(chunks) <= 1):
-        with threadpool_limits(1):  # small banded solves: BLAS threads only spin
-            for chunk, chunk_labels in chunks:
-                results.extend(_build_chunk(chunk, chunk_labels, params, model))
-                done += len(chunk)
-                if progress:
-                    progress(done, total)
-    else:
-        # One BLAS thread per worker: OpenBLAS's own threads would fight the worker processes for the cores.
-        # A given executor (a Dask cluster) runs the very same chunks; it is the caller's to shut down.
-        with nullcontext(executor) if executor is not None else local_pool(workers) as pool:
-            futures = [pool.submit(_build_chunk, chunk, lab, params, model) for chunk, lab in chunks]
-            for fut, (chunk, _) in zip(futures, chunks, strict=True):
-                results.extend(fut.result())
-                done += len(chunk)
-                if progress:
-                    progress(done, total)
-    built_pairs = [(c, r) for c, r in zip(contours, results, strict=True) if isinstance(r, CCS)]
-    repaired = 0
-    if params.resolve_crossings and params.target_mode == "scale" and built_pairs:
-        with threadpool_limits(1):
-            repaired = resolve_crossings(built_pairs, labels_of(contours, labels, built_pairs), params, model)
-    surfaces = [r for _, r in built_pairs]
-    bad = list(contour_set.bad_features) + rejected + [r for r in results if isinstance(r, BadFeature)]
-    return BuiltSet(
-        surfaces=surfaces,
+    # One BLAS thread per worker: OpenBLAS's own threads would fight the worker processes for the cores.
+    # A given executor (a Dask cluster) runs the very same chunks and repair tasks; it is the caller's to shut
+    # down. The local pool stays open through the crossing repair, whose checks and rebuilds it runs too.
+    with _pool(executor, workers, len(starts)) as pool:
+        for start, results in zip(starts, map_ordered(pool, _build_chunk, tasks), strict=True):
+            surfaces = [(start + k, r) for k, r in enumerate(results) if isinstance(r, CCS)]
+            failed.extend(r for r in results if isinstance(r, BadFeature))
+            numbered = [(len(built) + k, s) for k, (_, s) in enumerate(surfaces)]
+            _put_all(spool, numbered)
+            pieces.put([k for k, _ in numbered], [s for _, s in numbered])
+            built.extend(i for i, _ in surfaces)
+            boxes.extend(s.bounds for _, s in surfaces)
+            if progress:
+                progress(min(start + CHUNK, total), total)
+        repaired = 0
+        if params.resolve_crossings and params.target_mode == "scale" and built:
+            with threadpool_limits(1):
+                inputs = [contours[i] for i in built]
+                repaired = resolve_crossings(
+                    spool, np.array(boxes), pieces, inputs, labels[built].tolist(), params, model, pool
+                )
+    return SpooledSet(
+        spool=spool,
+        count=len(built),
         model=model,
         params=params,
         working_crs=contour_set.working_crs,
         source_crs=contour_set.source_crs,
-        bad_features=bad,
+        bad_features=list(contour_set.bad_features) + rejected + failed,
         name=contour_set.name,
         interval=contour_set.interval,
         repaired=repaired,
     )
 
 
+def _usable(contours: Sequence[Contour]) -> tuple[list[Contour], list[BadFeature]]:
+    """The contours a CCS can be built from, and the others with the reason. Checked before anything is
+    built: one unusable contour must not break the grouping of the others."""
+    usable: list[Contour] = []
+    rejected: list[BadFeature] = []
+    for contour in contours:
+        try:
+            check_contour(contour)
+        except CCSMError as exc:
+            rejected.append(BadFeature(contour.id, str(exc)))
+        else:
+            usable.append(contour)
+    return usable, rejected
+
+
+def _put_all(spool: Spool, items: list[tuple[int, CCS]]) -> None:
+    """Keep surfaces in the spool, in one statement where the spool can."""
+    put_many = getattr(spool, "put_many", None)
+    if put_many is not None:
+        put_many(items)
+    else:
+        for i, s in items:
+            spool.put(i, s)
+
+
+#: Contours per rebuild task of the crossing repair: a round rebuilds a few hundred at most.
+REPAIR_CHUNK = 16
+
 #: Rounds of crossing repair; each halves the target tolerance of the contours involved, the last keeps L0
 #: (Ln = L0: the contour no longer moves, so two such contours are as apart as in the input).
 REPAIR_FACTORS = (0.5, 0.25, 0.125, 0.0)
-
-
-def labels_of(
-    contours: Sequence[Contour], labels: np.ndarray, pairs: Sequence[tuple[Contour, CCS]]
-) -> list[int]:
-    """Group label of each built contour."""
-    index = {id(c): i for i, c in enumerate(contours)}
-    return [int(labels[index[id(c)]]) for c, _ in pairs]
 
 
 def checked_ladder_steps(model: ScaleModel) -> list[int]:
@@ -217,7 +298,14 @@ def checked_ladder_steps(model: ScaleModel) -> list[int]:
 
 
 def resolve_crossings(
-    pairs: list[tuple[Contour, CCS]], labels: Sequence[int], params: BuildParams, model: ScaleModel
+    spool: Spool,
+    boxes: NDArray[np.float64],
+    pieces: PieceIndex,
+    inputs: Sequence[Contour],
+    labels: Sequence[int],
+    params: BuildParams,
+    model: ScaleModel,
+    executor: Executor | None = None,
 ) -> int:
     """Rebuild, with finer targets, the contours whose slices meet a neighbour at some scale; returns how
     many changed.
@@ -226,34 +314,73 @@ def resolve_crossings(
     them and must not be blamed for them. Rounds go on until no new contact is left: a contour rebuilt in
     the last round (Ln = L0, it no longer moves) can still be met by a neighbour that was not involved
     before, and that neighbour then gets the same treatment.
+
+    The check runs block by block (:mod:`engine.ccsm.blocks`: each block's contours against those that can
+    reach them, the same pairs as a check of the whole set) and the rebuilds in chunks, both on ``executor``
+    when given (a local pool or a Dask cluster), else in this process.
+
+    Parameters
+    ----------
+    spool
+        The surfaces, numbered 0 .. n - 1; rebuilt ones replace theirs.
+    boxes, pieces
+        (n, 4) each surface's box, and their pieces (both kept up to date here).
+    inputs, labels
+        Each surface's input contour and regression group.
     """
     steps = checked_ladder_steps(model)
-    allowed = crossing_pairs([s.at(0.0) for _, s in pairs], within=INPUT_TOUCH_M)
+    touches = input_touches(spool)
+    factors = np.ones(len(inputs))  # the first build uses the full target tolerance
     changed: set[int] = set()
-    involved = find_new_crossings([s for _, s in pairs], model.ladder, steps, allowed)
+    involved = find_crossings_by_block(spool, boxes, pieces, model.ladder, steps, None, executor, touches=touches)
     round_ = 0
     while involved:
         factor = REPAIR_FACTORS[min(round_, len(REPAIR_FACTORS) - 1)]
         round_ += 1
-        rebuilt_now: set[int] = set()
+        todo = []
         for i in sorted(involved):
-            contour, old = pairs[i]
             # Never coarser than before, and at least one step finer than its last build.
-            new_factor = min(factor, _next_factor(old.tolerance_factor))
-            if old.tolerance_factor <= new_factor:
-                continue
-            rebuilt = _build_chunk([contour], [labels[i]], params, model, [new_factor])[0]
+            new_factor = min(factor, _next_factor(float(factors[i])))
+            if factors[i] > new_factor:
+                todo.append((i, new_factor))
+        rebuilt_now: set[int] = set()
+        for (i, _), rebuilt in zip(todo, _rebuild(inputs, labels, todo, params, model, executor), strict=True):
             if isinstance(rebuilt, CCS):
-                pairs[i] = (contour, rebuilt)
+                spool.put(i, rebuilt)
+                boxes[i] = rebuilt.bounds
+                pieces.put([i], [rebuilt])
+                factors[i] = rebuilt.tolerance_factor
                 changed.add(i)
                 rebuilt_now.add(i)
         # Only the rebuilt contours can have made new crossings (or still have old ones).
         involved = (
-            find_new_crossings([s for _, s in pairs], model.ladder, steps, allowed, rebuilt_now)
+            find_crossings_by_block(spool, boxes, pieces, model.ladder, steps, rebuilt_now, executor, touches=touches)
             if rebuilt_now
             else set()
         )
     return len(changed)
+
+
+def _rebuild(
+    inputs: Sequence[Contour],
+    labels: Sequence[int],
+    todo: Sequence[tuple[int, float]],
+    params: BuildParams,
+    model: ScaleModel,
+    executor: Executor | None,
+) -> list[CCS | BadFeature]:
+    """Rebuild contours ``todo`` = (index, tolerance factor), in chunks on ``executor``; results in order."""
+    tasks = [
+        (
+            [inputs[i] for i, _ in todo[k : k + REPAIR_CHUNK]],
+            [labels[i] for i, _ in todo[k : k + REPAIR_CHUNK]],
+            params,
+            model,
+            [f for _, f in todo[k : k + REPAIR_CHUNK]],
+        )
+        for k in range(0, len(todo), REPAIR_CHUNK)
+    ]
+    return [r for chunk in map_ordered(executor, _build_chunk, tasks) for r in chunk]
 
 
 def _next_factor(factor: float) -> float:

@@ -36,10 +36,20 @@ def ring_area(coords: Coords) -> float:
     >>> ring_area(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]]))
     2.0
     """
+    return float(ring_areas(np.asarray(coords)[None])[0])
+
+
+def ring_areas(rings: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Unsigned areas of k rings of n vertices each, (k, n, 2) -> (k,) (shoelace), in squared units.
+
+    >>> ring_areas(np.array([[[0.0, 0.0], [2.0, 0.0], [2.0, 1.0]], [[0.0, 0.0], [1.0, 0.0], [0.0, 3.0]]]))
+    array([1. , 1.5])
+    """
     # Relative to the first vertex: at UTM magnitudes the raw products cancel and lose the small ring's area.
-    local = coords - coords[0]
-    x, y = local[:, 0], local[:, 1]
-    return float(abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))) / 2.0)
+    # That vertex is then (0, 0), so the closing term x[n-1] y[0] - y[n-1] x[0] vanishes.
+    local = rings - rings[:, :1]
+    x, y = local[..., 0], local[..., 1]
+    return np.abs(np.einsum("kn,kn->k", x[:, :-1], y[:, 1:]) - np.einsum("kn,kn->k", y[:, :-1], x[:, 1:])) / 2.0
 
 
 def points_at_lengths(coords: Coords, cumlen: NDArray[np.float64], at: NDArray[np.float64]) -> Coords:

@@ -196,5 +196,6 @@ def contour_windows(
         raise SourceError(
             f"{path.name}: no contour at interval {interval:g} within the DEM's range [{zmin:g}, {zmax:g}]"
         )
-    joined = [(level, join_pieces(by_level[level])) for level in sorted(by_level)]
+    # Each level's pieces are let go as soon as they are joined: only one copy of the lines at a time.
+    joined = [(level, join_pieces(by_level.pop(level))) for level in sorted(by_level)]
     return line_parts_from_traced(joined, header.transform, path.name), header.crs_wkt

@@ -128,9 +128,7 @@ def read_contours(
     if not path.exists():
         raise SourceError(f"{path}: file not found")
     if path.suffix.lower() not in VECTOR_SUFFIXES:
-        raise SourceError(
-            f"{path}: unknown contour format {path.suffix!r}; expected one of {VECTOR_SUFFIXES}"
-        )
+        raise SourceError(f"{path}: unknown contour format {path.suffix!r}; expected one of {VECTOR_SUFFIXES}")
     try:
         if layer is None:
             # Name the first layer explicitly: pyogrio warns when it has to pick one of several itself.
@@ -172,8 +170,7 @@ def _find_elevation_field(field_names: Sequence[str], requested: str | None, pat
         if requested.lower() in lower:
             return lower.index(requested.lower())
         raise SourceError(
-            f"{path}: elevation field {requested!r} not found; "
-            f"available fields: {', '.join(field_names) or 'none'}"
+            f"{path}: elevation field {requested!r} not found; available fields: {', '.join(field_names) or 'none'}"
         )
     for candidate in ELEVATION_FIELDS:
         if candidate in lower:
@@ -222,9 +219,7 @@ def _parse_elevations(values: NDArray[Any], name: str) -> tuple[NDArray[np.float
         for j in np.flatnonzero(~np.isfinite(elevations)).tolist():
             v = elevations[j]
             reasons[j] = (
-                f"no elevation in field {name!r}"
-                if np.isnan(v)
-                else f"elevation {v} in field {name!r} is not finite"
+                f"no elevation in field {name!r}" if np.isnan(v) else f"elevation {v} in field {name!r} is not finite"
             )
         magnitude = np.abs(np.nan_to_num(elevations, nan=0.0, posinf=0.0, neginf=0.0))
         for j in np.flatnonzero(magnitude > MAX_ABS_ELEVATION).tolist():
@@ -321,6 +316,22 @@ def _explode_lines(
     )
 
 
+#: Vertices checked and projected at once while a source is assembled: the several temporary (n, 2) arrays of
+#: a batch stay a few tens of MB whatever the size of the source (a national contour set has hundreds of
+#: millions of vertices).
+ASSEMBLE_BATCH_VERTICES = 1 << 20
+
+
+@dataclass
+class _Checked:
+    """A batch of parts checked in the source CRS: which parts are usable so far, why the others are not, and
+    the lon/lat extent of the usable ones (None when there is none)."""
+
+    ok: NDArray[np.bool_]
+    reasons: dict[int, str]
+    bounds: tuple[float, float, float, float] | None
+
+
 def assemble_contours(
     parts: LineParts,
     *,
@@ -336,7 +347,9 @@ def assemble_contours(
     :func:`engine.io.crs.lonlat_validity`); all vertices are projected to the working CRS in one call; a part
     whose ends lie within ``tolerances.duplicate_m`` is a closed ring and loses its repeated last vertex;
     consecutive vertices closer than ``duplicate_m`` are merged (the first is kept); a line needs 2 distinct
-    vertices, a ring 3, and a length of at least ``tolerances.zero_length_m``.
+    vertices, a ring 3, and a length of at least ``tolerances.zero_length_m``. Parts are handled in batches of
+    about :data:`ASSEMBLE_BATCH_VERTICES` vertices (the working CRS is chosen first, from every batch's usable
+    extent), so the temporary arrays are that size whatever the size of the source.
 
     Parameters
     ----------
@@ -362,7 +375,71 @@ def assemble_contours(
     SourceError
         No part is usable.
     """
+    batches = [_sub_parts(parts, a, b) for a, b in _batch_ranges(parts.offsets, ASSEMBLE_BATCH_VERTICES)]
+    checks = [_check_in_source_crs(batch, source_crs) for batch in batches]
+    usable = [c.bounds for c in checks if c.bounds is not None]
+    if not usable:
+        listed = [
+            b for batch, c in zip(batches, checks, strict=True) for b in _bad_from_reasons(batch, c.reasons, where)
+        ]
+        _raise_nothing_usable(where, list(parts.bad) + listed)
+    # The working CRS from the extent of the usable parts, then each batch projected with one call.
+    extent = np.array(usable)
+    bounds = (
+        float(extent[:, 0].min()),
+        float(extent[:, 1].min()),
+        float(extent[:, 2].max()),
+        float(extent[:, 3].max()),
+    )
+    source_text = crs_to_string(source_crs)
+    working_crs = choose_working_crs(source_text, bounds)
+    to_working = make_transformer(source_text, working_crs)
     bad = list(parts.bad)
+    contours: list[Contour] = []
+    for batch, check in zip(batches, checks, strict=True):
+        contours.extend(_clean_in_working_crs(batch, check, to_working, working_crs, tolerances))
+        bad.extend(_bad_from_reasons(batch, check.reasons, where))
+    if not contours:
+        _raise_nothing_usable(where, bad)
+    if interval is None:
+        interval = infer_interval(np.array([c.elevation for c in contours], dtype=np.float64))
+    return ContourSet(
+        contours=contours,
+        working_crs=working_crs,
+        source_crs=source_text,
+        bad_features=bad,
+        name=name,
+        interval=interval,
+    )
+
+
+def _batch_ranges(offsets: NDArray[np.int64], vertices: int) -> list[tuple[int, int]]:
+    """Consecutive part ranges [a, b) of about ``vertices`` vertices each (a bigger part makes a batch alone).
+
+    >>> _batch_ranges(np.array([0, 3, 5, 20, 21]), 4)
+    [(0, 1), (1, 2), (2, 3), (3, 4)]
+    >>> _batch_ranges(np.array([0, 1, 2, 3]), 10)
+    [(0, 3)]
+    """
+    n = len(offsets) - 1
+    out: list[tuple[int, int]] = []
+    a = 0
+    while a < n:
+        b = int(np.searchsorted(offsets, offsets[a] + vertices, side="right")) - 1
+        b = min(max(b, a + 1), n)
+        out.append((a, b))
+        a = b
+    return out
+
+
+def _sub_parts(parts: LineParts, a: int, b: int) -> LineParts:
+    """Parts a .. b - 1 as a LineParts of their own (the vertices a view, not a copy)."""
+    lo, hi = int(parts.offsets[a]), int(parts.offsets[b])
+    return LineParts(parts.xy[lo:hi], parts.offsets[a : b + 1] - lo, parts.ids[a:b], parts.elevations[a:b])
+
+
+def _check_in_source_crs(parts: LineParts, source_crs: pyproj.CRS) -> _Checked:
+    """Steps 1 and 2 of :func:`assemble_contours` for one batch: finite, valid for the CRS, within Web Mercator."""
     n_parts = len(parts.ids)
     counts = np.diff(parts.offsets)
     part_of = np.repeat(np.arange(n_parts), counts)
@@ -391,18 +468,28 @@ def assemble_contours(
 
     # 2b. Beyond Web Mercator's latitudes: valid coordinates, yet no tile can show them.
     ok &= ~_beyond_web_mercator(parts, part_of, ok, lonlat, reasons)
-
     if not ok.any():
-        _raise_nothing_usable(where, bad + _bad_from_reasons(parts, reasons, where))
+        return _Checked(ok, reasons, None)
+    ll = lonlat[ok[part_of]]
+    return _Checked(
+        ok, reasons, (float(ll[:, 0].min()), float(ll[:, 1].min()), float(ll[:, 0].max()), float(ll[:, 1].max()))
+    )
 
-    # 3. The working CRS from the extent of the usable parts, and one projection call for all their vertices.
+
+def _clean_in_working_crs(
+    parts: LineParts, check: _Checked, to_working: Any, working_crs: str, tolerances: Tolerances
+) -> list[Contour]:
+    """Steps 3 and 4 of :func:`assemble_contours` for one checked batch: projected, rings closed, duplicate
+    vertices merged, too short parts left out (their reasons added to ``check.reasons``)."""
+    n_parts = len(parts.ids)
+    counts = np.diff(parts.offsets)
+    part_of = np.repeat(np.arange(n_parts), counts)
+    xy, ok, reasons = parts.xy, check.ok.copy(), check.reasons
+    if not ok.any():
+        return []
     use = ok[part_of]
-    ll = lonlat[use]
-    bounds = (float(ll[:, 0].min()), float(ll[:, 1].min()), float(ll[:, 0].max()), float(ll[:, 1].max()))
-    source_text = crs_to_string(source_crs)
-    working_crs = choose_working_crs(source_text, bounds)
     projected = np.full_like(xy, np.nan)
-    projected[use] = make_transformer(source_text, working_crs)(xy[use])
+    projected[use] = to_working(xy[use])
     projected_ok = np.isfinite(projected).all(axis=1) | ~use
     for k in np.unique(part_of[~projected_ok]):
         reasons.setdefault(int(k), f"coordinates cannot be projected to {working_crs}")
@@ -430,14 +517,10 @@ def assemble_contours(
             reasons[int(k)] = "closed ring with fewer than 3 distinct points"
         elif lengths[k] < tolerances.zero_length_m:
             reasons[int(k)] = f"zero length ({lengths[k]:.3g} m)"
-    bad.extend(_bad_from_reasons(parts, reasons, where))
     ok &= np.array([k not in reasons for k in range(n_parts)], dtype=bool)
-    if not ok.any():
-        _raise_nothing_usable(where, bad)
-
     kept_xy = projected[keep]
     kept_offsets = np.concatenate([[0], np.cumsum(kept_counts)])
-    contours = [
+    return [
         Contour(
             id=parts.ids[k],
             elevation=float(parts.elevations[k]),
@@ -446,16 +529,6 @@ def assemble_contours(
         )
         for k in np.flatnonzero(ok)
     ]
-    if interval is None:
-        interval = infer_interval(parts.elevations[ok])
-    return ContourSet(
-        contours=contours,
-        working_crs=working_crs,
-        source_crs=source_text,
-        bad_features=bad,
-        name=name,
-        interval=interval,
-    )
 
 
 def _beyond_web_mercator(
@@ -470,9 +543,7 @@ def _beyond_web_mercator(
     for k in np.unique(part_of[polar]).tolist():
         lo, hi = int(parts.offsets[k]), int(parts.offsets[k + 1])
         lat = float(lonlat[lo + int(np.argmax(np.abs(lonlat[lo:hi, 1])))][1])
-        reasons.setdefault(
-            int(k), f"latitude {lat:.6g} is outside Web Mercator's range (±{WEB_MERCATOR_MAX_LAT:.4f}°)"
-        )
+        reasons.setdefault(int(k), f"latitude {lat:.6g} is outside Web Mercator's range (±{WEB_MERCATOR_MAX_LAT:.4f}°)")
     return np.isin(np.arange(len(ok)), part_of[polar])
 
 
@@ -661,9 +732,7 @@ def write_geojson(
     finite = np.isfinite(out).all(axis=1)
     if not finite.all():
         k = int(np.searchsorted(np.cumsum(counts), int(np.flatnonzero(~finite)[0]), side="right"))
-        raise InvalidContour(
-            f"feature {props[k].get('id', k)!r}: coordinates cannot be transformed to {to_crs}"
-        )
+        raise InvalidContour(f"feature {props[k].get('id', k)!r}: coordinates cannot be transformed to {to_crs}")
     out = np.round(out, decimals)
 
     header: dict[str, Any] = {"type": "FeatureCollection"}

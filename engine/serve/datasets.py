@@ -21,12 +21,13 @@ from typing import Any
 
 from engine.cartography.options import PARAMS_KEY, CartographyOptions, check_schedule_fits
 from engine.cartography.units import source_units
-from engine.ccsm.build import BuiltSet, build_contour_set
+from engine.ccsm.build import BuiltSet, SpooledSet, build_into
 from engine.io.dem import DEM_SUFFIXES
 from engine.io.source import read_source
 from engine.params import BuildParams
 from engine.serve.records import contour_rows, dataset_meta
-from engine.store.sqlite import STORE_FORMAT, CCSStore, DatasetInfo
+from engine.store.spool import DiskSpool
+from engine.store.sqlite import STORE_FORMAT, CCSStore, DatasetInfo, NewContour
 from engine.types import Contour, ContourSet
 
 Progress = Callable[[int, int], None]
@@ -199,27 +200,32 @@ def build_and_save(
     """
     started = time.perf_counter()
     build_params = BuildParams(source_scale=params["source_scale"], target_scale=params["target_scale"])
-    built = build_contour_set(contour_set, build_params, workers=workers, progress=progress, executor=executor)
-    if still_wanted is not None and not still_wanted():
-        return None
-    return save_built(
-        store,
-        dataset,
-        built,
-        contour_set.contours,
-        name=name,
-        source=source,
-        digest=digest,
-        params=params,
-        build_seconds=time.perf_counter() - started,
-        only_if_building=only_if_building,
-    )
+    # The surfaces wait in a scratch file beside the store, not in memory (docs/design.md section 6).
+    spool = DiskSpool(Path(store.path).parent)
+    try:
+        built = build_into(spool, contour_set, build_params, workers=workers, progress=progress, executor=executor)
+        if still_wanted is not None and not still_wanted():
+            return None
+        return save_built(
+            store,
+            dataset,
+            built,
+            contour_set.contours,
+            name=name,
+            source=source,
+            digest=digest,
+            params=params,
+            build_seconds=time.perf_counter() - started,
+            only_if_building=only_if_building,
+        )
+    finally:
+        spool.close()
 
 
 def save_built(
     store: CCSStore,
     dataset: str,
-    built: BuiltSet,
+    built: BuiltSet | SpooledSet,
     contours: Sequence[Contour],
     *,
     name: str,
@@ -229,11 +235,33 @@ def save_built(
     build_seconds: float = 0.0,
     only_if_building: bool = False,
 ) -> DatasetInfo:
-    """Write a built set (``contours``: the input contours it was built from) as one dataset version."""
+    """Write a built set (``contours``: the input contours it was built from) as one dataset version.
+
+    Rows are made and written batch by batch (:data:`SAVE_BATCH` contours) inside the store's one write
+    transaction, so the reprojected rows of only one batch are in memory at a time.
+    """
     meta = dataset_meta(
         built, name=name, source=source, source_hash=digest, params=params, build_seconds=build_seconds
     )
-    return store.save(dataset, meta, contour_rows(built, contours), only_if_building=only_if_building)
+    return store.save(dataset, meta, _rows_in_batches(built, contours), only_if_building=only_if_building)
+
+
+#: Contours whose store rows are made at once while a built set is written.
+SAVE_BATCH = 512
+
+
+def _rows_in_batches(built: BuiltSet | SpooledSet, contours: Sequence[Contour]) -> Iterator[NewContour]:
+    """The store rows of ``built``, made :data:`SAVE_BATCH` surfaces at a time (a spooled set reads only that
+    batch of surfaces from its spool)."""
+    by_key = {(c.id, float(c.elevation), c.n_vertices): c for c in contours}
+    if isinstance(built, SpooledSet):
+        batches = built.surfaces_in_batches(SAVE_BATCH)
+    else:
+        batches = (built.surfaces[i : i + SAVE_BATCH] for i in range(0, len(built.surfaces), SAVE_BATCH))
+    for batch in batches:
+        keys = ((s.contour_id, float(s.elevation), int(s.n_input_vertices)) for s in batch)
+        inputs = [by_key[k] for k in keys if k in by_key]
+        yield from contour_rows(batch, built.working_crs, inputs)
 
 
 def build_dataset(

@@ -17,7 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from engine.ccsm.build import BuiltSet
+from engine.ccsm.build import BuiltSet, SpooledSet
+from engine.ccsm.ccs import CCS
 from engine.errors import StoreError
 from engine.geom.polyline import closed_path
 from engine.io.crs import WEB_MERCATOR, make_transformer
@@ -26,8 +27,9 @@ from engine.tiles.significance import row_significance
 from engine.types import BadFeature, Contour
 
 
-def contour_rows(built: BuiltSet, contours: Sequence[Contour]) -> list[NewContour]:
-    """The store rows of a built set; ``contours`` are the input contours it was built from.
+def contour_rows(surfaces: Sequence[CCS], working_crs: str, contours: Sequence[Contour]) -> list[NewContour]:
+    """The store rows of built surfaces (coordinates in ``working_crs``); ``contours`` are the input contours
+    they were built from.
 
     Contours whose reprojection is not finite (outside Web Mercator's range) are left out.
 
@@ -36,10 +38,10 @@ def contour_rows(built: BuiltSet, contours: Sequence[Contour]) -> list[NewContou
     StoreError
         A built contour's input coordinates are not among ``contours``.
     """
-    to_3857 = make_transformer(built.working_crs, WEB_MERCATOR)
+    to_3857 = make_transformer(working_crs, WEB_MERCATOR)
     originals = {(c.id, float(c.elevation), c.n_vertices): c.coords for c in contours}
     rows: list[NewContour] = []
-    for ccs in built.surfaces:
+    for ccs in surfaces:
         both = to_3857(np.concatenate([ccs.base, ccs.top]))
         m = len(ccs.base)
         base, top = both[:m], both[m:]
@@ -82,7 +84,13 @@ def bad_feature_dict(b: BadFeature) -> dict[str, Any]:
 
 
 def dataset_meta(
-    built: BuiltSet, *, name: str, source: str, source_hash: str, params: dict[str, Any], build_seconds: float
+    built: BuiltSet | SpooledSet,
+    *,
+    name: str,
+    source: str,
+    source_hash: str,
+    params: dict[str, Any],
+    build_seconds: float,
 ) -> NewDataset:
     """The metadata row of a built set."""
     return NewDataset(

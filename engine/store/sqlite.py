@@ -20,7 +20,7 @@ import os
 import sqlite3
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from itertools import chain
@@ -274,6 +274,27 @@ def _contour_row(dataset: str, c: NewContour) -> tuple[Any, ...]:
 _UNWRITABLE_MESSAGES = ("database or disk is full", "readonly database", "disk i/o error", "unable to open")
 
 
+class _RowTally:
+    """Counts and bounds of the rows written so far (a dataset's row is written after its contours)."""
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.closed = 0
+        self.vertices = 0
+        self.box = [math.inf, math.inf, -math.inf, -math.inf]  # minx, miny, maxx, maxy
+
+    def add(self, c: NewContour) -> None:
+        self.n += 1
+        self.closed += int(c.closed)
+        self.vertices += c.n_input
+        minx, maxx, miny, maxy = c.box
+        self.box = [min(self.box[0], minx), min(self.box[1], miny), max(self.box[2], maxx), max(self.box[3], maxy)]
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        """(minx, miny, maxx, maxy) of every row, zeros when there is none."""
+        return (0.0, 0.0, 0.0, 0.0) if self.n == 0 else (self.box[0], self.box[1], self.box[2], self.box[3])
+
+
 def unwritable_reason(exc: BaseException) -> str | None:
     """Why a write failed when the file system refused it (else None: a bug, not the disk)."""
     text = str(exc).lower()
@@ -463,32 +484,39 @@ class CCSStore:
         self,
         dataset: str,
         meta: NewDataset,
-        contours: Sequence[NewContour],
+        contours: Iterable[NewContour],
         progress: Callable[[int, int], None] | None = None,
         *,
         only_if_building: bool = False,
     ) -> DatasetInfo:
         """Write a dataset, replacing any previous version, in one transaction.
 
-        Inside the transaction the old rows are deleted and the new ones inserted. An exception (or a killed
-        process) before COMMIT leaves the previous version untouched. With ``only_if_building`` the write
-        happens only while the dataset's build is still recorded (checked inside the transaction), so a
-        dataset deleted during its build never comes back: BuildCancelled is raised instead.
+        Inside the transaction the old rows are deleted and the new ones inserted as ``contours`` yields
+        them (a generator keeps only one batch of rows in memory; the dataset's row, with its bounds and
+        counts, goes in last). An exception (or a killed process) before COMMIT leaves the previous version
+        untouched. With ``only_if_building`` the write happens only while the dataset's build is still
+        recorded (checked inside the transaction), so a dataset deleted during its build never comes back:
+        BuildCancelled is raised instead. ``progress`` gets (rows written, rows known so far).
         """
-        if contours:
-            boxes = np.array([c.box for c in contours])
-            bounds = (
-                float(boxes[:, 0].min()),
-                float(boxes[:, 2].min()),
-                float(boxes[:, 1].max()),
-                float(boxes[:, 3].max()),
-            )
-        else:
-            bounds = (0.0, 0.0, 0.0, 0.0)
         with self._write() as cur:
             if only_if_building and not self._is_building(cur, dataset):
                 raise BuildCancelled(f"dataset {dataset!r} was deleted while it built")
             self._delete_rows(cur, dataset)
+            counts = _RowTally()
+            step = 256
+            for c in contours:
+                cur.execute(
+                    "INSERT INTO contours(dataset, contour_id, elevation, closed, grp, vanish_scale, "
+                    "length_m, n_rows, n_input, base, top, original, original_w, t_at_scale, sim_t, sim, sig, "
+                    "sig_original) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                    _contour_row(dataset, c),
+                )
+                cur.execute("INSERT INTO contour_rtree VALUES (?,?,?,?,?,?)", (cur.lastrowid, *c.box, dataset))
+                counts.add(c)
+                if progress and counts.n % step == 0:
+                    progress(counts.n, counts.n)
+            if progress:
+                progress(counts.n, counts.n)
             counter = (
                 int(cur.execute("SELECT value FROM store_meta WHERE key='version_counter'").fetchone()[0]) + 1
             )
@@ -507,28 +535,16 @@ class CCSStore:
                     meta.working_crs,
                     meta.source_crs,
                     None if meta.interval is None else float(meta.interval),
-                    *bounds,
-                    len(contours),
-                    sum(int(c.closed) for c in contours),
-                    sum(c.n_input for c in contours),
+                    *counts.bounds(),
+                    counts.n,
+                    counts.closed,
+                    counts.vertices,
                     float(meta.source_scale),
                     float(meta.target_scale),
                     _blob(np.asarray(meta.ladder, dtype=np.float64)),
                     json.dumps(meta.bad_features),
                 ),
             )
-            step = 256
-            for i in range(0, len(contours), step):
-                for c in contours[i : i + step]:
-                    cur.execute(
-                        "INSERT INTO contours(dataset, contour_id, elevation, closed, grp, vanish_scale, "
-                        "length_m, n_rows, n_input, base, top, original, original_w, t_at_scale, sim_t, sim, sig, "
-                        "sig_original) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
-                        _contour_row(dataset, c),
-                    )
-                    cur.execute("INSERT INTO contour_rtree VALUES (?,?,?,?,?,?)", (cur.lastrowid, *c.box, dataset))
-                if progress:
-                    progress(min(i + step, len(contours)), len(contours))
             cur.execute("DELETE FROM builds WHERE dataset=?", (dataset,))
         return self.dataset(dataset)
 
@@ -575,7 +591,7 @@ class CCSStore:
         now = time.time()
         cur.execute(
             "INSERT INTO builds VALUES (?,?,?,?,?,?,?,?,?)",
-            (dataset, "building", 0, int(total), None, os.getpid(), _host(), now, now),
+            (dataset, "building", 0, int(total), None, os.getpid(), host_name(), now, now),
         )
 
     def reserve(self, dataset: str, total: int = 0) -> bool:
@@ -612,7 +628,7 @@ class CCSStore:
         with self._write() as cur:
             cur.execute(
                 "UPDATE builds SET done=?, total=?, pid=?, host=?, updated=? WHERE dataset=? AND state='building'",
-                (int(done), int(total), os.getpid(), _host(), time.time(), dataset),
+                (int(done), int(total), os.getpid(), host_name(), time.time(), dataset),
             )
             return cur.rowcount > 0
 
@@ -686,7 +702,7 @@ class CCSStore:
             started = now if row is None or state == "building" and done == 0 else row[0]
             cur.execute(
                 "INSERT OR REPLACE INTO builds VALUES (?,?,?,?,?,?,?,?,?)",
-                (dataset, state, done, total, error, os.getpid(), _host(), started, now),
+                (dataset, state, done, total, error, os.getpid(), host_name(), started, now),
             )
 
     def clear_build_status(self, dataset: str) -> None:
@@ -699,7 +715,7 @@ class CCSStore:
         out = {}
         for r in self._con().execute("SELECT * FROM builds"):
             status = BuildStatus(*r)
-            if status.state == "building" and status.host == _host() and not pid_alive(status.pid):
+            if status.state == "building" and status.host == host_name() and not pid_alive(status.pid):
                 status = BuildStatus(
                     status.dataset,
                     "failed",
@@ -719,5 +735,6 @@ class CCSStore:
         return self._con().execute("PRAGMA integrity_check").fetchone()[0] == "ok"
 
 
-def _host() -> str:
+def host_name() -> str:
+    """This machine's name, as builds record it."""
     return os.uname().nodename if hasattr(os, "uname") else "localhost"

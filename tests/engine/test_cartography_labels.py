@@ -142,3 +142,27 @@ def test_integer_columns_and_points_encode_as_the_reference_decodes_them():
         }
     ]
     assert not math.isnan(labels[0]["properties"]["angle"])
+
+
+def test_label_placement_by_grid_keeps_exactly_the_labels_a_test_against_every_kept_label_keeps():
+    """Issue 12: placement files kept labels in a grid instead of testing each against all (quadratic, an hour on
+    a big dataset); the labels kept must be the same. The reference below tests every kept label."""
+    from engine.cartography.labels import _keep_apart
+
+    rng = np.random.default_rng(3)
+    n = 3_000
+    xy = rng.uniform(0, 200_000, (n, 2))
+    box = np.column_stack([rng.uniform(30, 160, n), rng.uniform(14, 40, n)])
+    zoom = np.round(rng.uniform(7, 15, n), 1)  # ties on purpose
+    order = np.lexsort((rng.uniform(size=n), zoom))
+    reference: list[int] = []
+    for j in order.tolist():
+        if reference:
+            k = np.array(reference)
+            half = (box[j] + box[k]) / 2 * metres_per_px(np.maximum(zoom[j], zoom[k]))[:, None]
+            if (np.abs(xy[k] - xy[j]) < half).all(axis=1).any():
+                continue
+        reference.append(j)
+    kept = _keep_apart(xy, box, zoom, order)
+    assert 200 < len(kept) < n  # some kept, some dropped: the test means something
+    assert kept == reference

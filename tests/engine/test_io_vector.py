@@ -536,3 +536,30 @@ def test_write_geojson_rejects_bad_input(tmp_path: Path) -> None:
         )
     assert not (tmp_path / "o.geojson").exists()
     assert list(tmp_path.iterdir()) == []  # no temporary file left behind
+
+
+def test_issue_12_a_source_assembled_in_small_batches_gives_the_contours_and_reasons_of_one_batch(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Parts are checked and projected in batches so a big source's temporaries stay small; the result must not
+    depend on the batch size (the working CRS comes from every batch's extent, reasons keep their order)."""
+    import engine.io.vector as vector
+    from engine.io.source import sample_contours_path
+
+    sample = json.loads(sample_contours_path().read_text())
+    features = sample["features"][:300]
+    features[3]["geometry"]["coordinates"] = [[float("nan"), 36.0], [-84.1, 36.1]]
+    features[40]["geometry"]["coordinates"] = features[40]["geometry"]["coordinates"][:1] * 2
+    features[200]["geometry"]["coordinates"][5] = [-84.1, 95.0]
+    path = tmp_path / "mixed.geojson"
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": features}))
+    whole = read_source(path)
+    monkeypatch.setattr(vector, "ASSEMBLE_BATCH_VERTICES", 50)
+    batched = read_source(path)
+    assert len(whole.bad_features) >= 3
+    assert [(b.id, b.reason) for b in batched.bad_features] == [(b.id, b.reason) for b in whole.bad_features]
+    assert (batched.working_crs, batched.interval) == (whole.working_crs, whole.interval)
+    assert len(batched.contours) == len(whole.contours) > 250
+    for a, b in zip(batched.contours, whole.contours, strict=True):
+        assert (a.id, a.elevation, a.closed) == (b.id, b.elevation, b.closed)
+        np.testing.assert_array_equal(a.coords, b.coords)

@@ -197,3 +197,49 @@ def test_issue_10_quick_check_finds_flipped_bytes(store, tmp_path):
     except StoreError as exc:
         problem = str(exc)
     assert problem != "ok" and problem
+
+
+def test_issue_12_rows_written_batch_by_batch_make_the_same_dataset(store, src, monkeypatch):
+    import engine.serve.datasets as datasets
+
+    whole = store.dataset("h")
+    rows = store.load(store.all_fids("h"))
+    monkeypatch.setattr(datasets, "SAVE_BATCH", 3)  # 8 contours: batches of 3, 3 and 2
+    info, rebuilt = build_dataset(store, SourceSpec(src, "h", "h"), workers=1, force=True)
+    assert rebuilt and info.data_version == whole.data_version + 1
+    written = store.load(store.all_fids("h"))
+    assert [r.contour_id for r in written] == [str(c.id) for c in read_source(src).contours]
+    for old, new in zip(rows, written, strict=True):
+        assert old.contour_id == new.contour_id and np.array_equal(old.base, new.base)
+    # The dataset's row, tallied as the rows went by, agrees with the rows themselves.
+    assert info.n_contours == len(written)
+    assert info.n_closed == sum(r.closed for r in written)
+    assert info.n_vertices == sum(len(r.original_w) for r in written)
+    xy = np.concatenate([np.concatenate([r.base, r.top, r.original]) for r in written])
+    assert info.bounds_3857 == (*xy.min(axis=0), *xy.max(axis=0))
+
+
+def test_issue_12_a_build_failing_in_its_second_batch_leaves_the_stored_version(store, src, monkeypatch):
+    import engine.serve.datasets as datasets
+
+    before = store.dataset("h")
+    fids = store.all_fids("h")
+    real_rows = datasets.contour_rows
+    calls = []
+
+    def fail_on_second_batch(*a):
+        calls.append(1)
+        if len(calls) == 2:
+            raise MemoryError("killed in the second batch")
+        return real_rows(*a)
+
+    monkeypatch.setattr(datasets, "SAVE_BATCH", 3)
+    monkeypatch.setattr(datasets, "contour_rows", fail_on_second_batch)
+    with pytest.raises(MemoryError):
+        build_dataset(store, SourceSpec(src, "h", "h", source_scale=40_000), workers=1)
+    for reader in (store, CCSStore(store.path)):
+        info = reader.dataset("h")
+        assert (info.data_version, info.source_hash, info.n_contours) == (
+            before.data_version, before.source_hash, before.n_contours
+        )
+        assert reader.all_fids("h") == fids

@@ -6,7 +6,7 @@ import shapely
 
 from engine.ccsm.build import build_contour_set
 from engine.ccsm.regression import t_for_scale
-from engine.ccsm.topology import crossing_pairs, sweep_contacts
+from engine.ccsm.topology import InputTouches, crossing_pairs, sweep_contacts
 from engine.params import BuildParams
 from engine.types import Contour, ContourSet
 
@@ -109,3 +109,13 @@ def test_sweep_contacts_find_touching_and_passing_through() -> None:
     through[:, 1] -= 12.0  # the whole line moves down through `line`, apart at both ends
     assert sweep_contacts([line, v_start], [line, through]) == {(0, 1)}
     assert not crossing_pairs([line, v_start]) and not crossing_pairs([line, through])
+
+
+def test_input_touches_knows_lines_that_meet_in_the_input_pair_by_pair() -> None:
+    a = np.array([[0.0, 0.0], [10.0, 0.0]])
+    saddle = np.array([[5.0, 1e-9], [5.0, 5.0]])  # a hair above a: touching, as lines of one level at a saddle
+    apart = np.array([[5.0, 0.5], [5.0, 5.0]])
+    touches = InputTouches([a, saddle, apart])
+    assert (0, 1) in touches
+    assert (0, 2) not in touches
+    assert (1, 2) in touches  # they overlap along x = 5

@@ -1,0 +1,346 @@
+"""Spatial blocks for the crossing repair: each block's contours are checked against the stretches of other
+contours that can reach them, not against the whole set (docs/design.md section 4.8, issue 12 item 2).
+
+Every surface is cut into pieces of :data:`INDEX_PIECE_SEGMENTS` segments, and each piece has a swept box: the
+box of its rows at t = 0 and t = 1, which holds its slices at every t. A contour belongs to the block of a
+square grid that holds its box centre. A block's *near* stretches are its own contours and, of every other
+contour, the rows from its first to its last piece whose box meets a piece box of an own contour: the only
+rows whose slices can meet the block's contours. Checking each block's own contours against its near
+stretches therefore finds exactly the meeting pairs a check of the whole set finds (each pair at least once,
+from the block of either contour), so the repair's decisions do not change. The piece boxes stay in memory
+(a few numbers per 16 rows); a block's surfaces are read from the spool only when its check is sent, so
+blocks are checked apart from each other, on any executor, with memory for a few blocks at a time.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator, Sequence
+from concurrent.futures import Executor
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import shapely
+from numpy.typing import NDArray
+
+from engine.ccsm.spool import Spool, surface_of
+from engine.ccsm.topology import InputTouches, new_contact_pairs, per_piece, piece_ranges
+from engine.parallel import map_ordered
+from engine.types import Coords
+
+if TYPE_CHECKING:
+    from engine.ccsm.ccs import CCS
+
+#: Contours per block on average: large enough that a block's check is worth a task, small enough that its
+#: surfaces are a small share of a big build's memory.
+BLOCK_CONTOURS = 1024
+
+#: Rows (about) per block: bounds a block's work and its worker's memory when contours are long.
+BLOCK_ROWS = 1 << 17
+
+#: Rebuilt contours per block when only they are checked again: small blocks keep each check to the rebuilt
+#: contours' surroundings.
+REBUILT_PER_BLOCK = 16
+
+#: Segments per piece of the blocks' index: short enough that a contour passing by a block is cut close to the
+#: block, long enough that the index is a small fraction of the rows.
+INDEX_PIECE_SEGMENTS = 16
+
+
+class PieceIndex:
+    """The swept boxes of every surface's pieces, by surface number; a rebuilt surface's pieces replace its old
+    ones (:meth:`put`).
+
+    >>> from engine.ccsm.ccs import CCS
+    >>> line = np.column_stack([np.arange(40.0), np.zeros(40)])
+    >>> index = PieceIndex()
+    >>> index.put([0], [CCS("a", 1.0, False, line, line + [0, 2], np.zeros(1), np.ones(1), 39.0, 40, 40)])
+    >>> index.arrays()[0].tolist()  # (minx, miny, maxx, maxy) of segments 0-16, 16-32, 32-39
+    [[0.0, 0.0, 16.0, 2.0], [16.0, 0.0, 32.0, 2.0], [32.0, 0.0, 39.0, 2.0]]
+    """
+
+    def __init__(self) -> None:
+        self._boxes: dict[int, NDArray[np.float64]] = {}
+        self._first: dict[int, NDArray[np.intp]] = {}
+        self._last: dict[int, NDArray[np.intp]] = {}
+
+    def put(self, numbers: Sequence[int], surfaces: Sequence[CCS]) -> None:
+        """Index ``surfaces`` as numbers ``numbers`` (one vectorised pass for them all)."""
+        if not len(surfaces):
+            return
+        sizes = np.array([len(s.base) for s in surfaces], dtype=np.intp)
+        first, last, owner = piece_ranges(sizes, INDEX_PIECE_SEGMENTS)
+        base = np.concatenate([s.base for s in surfaces])
+        top = np.concatenate([s.top for s in surfaces])
+        lo = per_piece(np.minimum, np.minimum(base, top), first, last)
+        hi = per_piece(np.maximum, np.maximum(base, top), first, last)
+        offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        cuts = np.searchsorted(owner, np.arange(1, len(surfaces)))
+        parts = zip(np.split(np.hstack([lo, hi]), cuts), np.split(first, cuts), np.split(last, cuts), strict=True)
+        for k, (boxes, f, la) in enumerate(parts):
+            number = int(numbers[k])
+            self._boxes[number] = boxes
+            self._first[number] = (f - offsets[k]).astype(np.intp)
+            self._last[number] = (la - offsets[k]).astype(np.intp)
+
+    def arrays(
+        self,
+    ) -> tuple[NDArray[np.float64], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]:
+        """(boxes (P, 4), first row, last row, owner, start) of every piece, sorted by owner; ``start[i]`` is
+        the first piece of surface i (``start`` has one more entry, the number of pieces)."""
+        numbers = sorted(self._boxes)
+        counts = np.array([len(self._first[i]) for i in numbers], dtype=np.intp)
+        start = np.zeros((numbers[-1] + 2) if numbers else 1, dtype=np.intp)
+        start[np.array(numbers, dtype=np.intp) + 1] = counts
+        start = np.cumsum(start)
+        if not numbers:
+            empty = np.zeros(0, dtype=np.intp)
+            return np.zeros((0, 4)), empty, empty, empty, start
+        return (
+            np.concatenate([self._boxes[i] for i in numbers]),
+            np.concatenate([self._first[i] for i in numbers]),
+            np.concatenate([self._last[i] for i in numbers]),
+            np.repeat(np.array(numbers, dtype=np.intp), counts),
+            start,
+        )
+
+
+@dataclass(frozen=True)
+class Block:
+    """One cell of the grid.
+
+    Attributes
+    ----------
+    own
+        (k,) indices of the contours whose box centre lies in the cell.
+    near
+        (m,) sorted indices of ``own`` and of every contour with a piece whose box meets a piece box of an own one.
+    first, last
+        (m,) the rows of each near contour to check: first to last (inclusive); -1 for the whole contour.
+    """
+
+    own: NDArray[np.intp]
+    near: NDArray[np.intp]
+    first: NDArray[np.intp]
+    last: NDArray[np.intp]
+
+
+def surface_boxes(surfaces: Sequence[CCS]) -> NDArray[np.float64]:
+    """(n, 4) box (minx, miny, maxx, maxy), metres, of each surface's base and top rows: every slice lies inside."""
+    return np.array([s.bounds for s in surfaces], dtype=np.float64).reshape(-1, 4)
+
+
+def spatial_blocks(
+    boxes: NDArray[np.float64],
+    pieces: PieceIndex,
+    only: NDArray[np.intp] | None = None,
+    per_block: int = BLOCK_CONTOURS,
+) -> list[Block]:
+    """The blocks of a grid over the owned contours' box centres, in row-major order; empty cells are left out.
+
+    Parameters
+    ----------
+    boxes
+        (n, 4) contour boxes (:func:`surface_boxes`).
+    pieces
+        The pieces of the same n surfaces.
+    only
+        If given, a block owns only these contours (the ones to check); all contours still count as near.
+    per_block
+        Owned contours per block on average (the grid has about len(only) / per_block cells).
+    """
+    n = len(boxes)
+    owned = np.arange(n, dtype=np.intp) if only is None else np.asarray(only, dtype=np.intp)
+    if n == 0 or len(owned) == 0:
+        return []
+    # The grid spans the owned contours only: a few rebuilt contours get small blocks of their own. Cells are
+    # sized by rows too, so a block of long contours is no heavier for its worker than one of short ones.
+    piece_boxes, first, last, owner, start = pieces.arrays()
+    rows = int((start[owned + 1] - start[owned]).sum()) * INDEX_PIECE_SEGMENTS
+    side = max(1, math.ceil(math.sqrt(len(owned) / max(1, per_block))), math.ceil(math.sqrt(rows / BLOCK_ROWS)))
+    centres = (boxes[owned, :2] + boxes[owned, 2:]) / 2
+    lo = centres.min(axis=0)
+    span = np.maximum(centres.max(axis=0) - lo, 1e-9)
+    cell = np.minimum((((centres - lo) / span) * side).astype(np.intp), side - 1)
+    key = cell[:, 1] * side + cell[:, 0]
+    order = np.argsort(key, kind="stable")
+    buckets = _Buckets(piece_boxes)
+    blocks = []
+    for group in np.split(owned[order], np.flatnonzero(np.diff(key[order])) + 1):
+        own = np.sort(group)
+        own_pieces = _concatenated_ranges(start[own], start[own + 1] - start[own])
+        # A tree of the pieces near this block only: one tree of every piece of a big set would hold a
+        # geometry per piece at once (hundreds of MB at a few million vertices).
+        candidates = buckets.near(piece_boxes[own_pieces])
+        tree = shapely.STRtree(_boxes(piece_boxes[candidates]))
+        _, hit = tree.query(_boxes(piece_boxes[own_pieces]))
+        blocks.append(_block(own, candidates[hit], first, last, owner))
+    return blocks
+
+
+def _boxes(boxes: NDArray[np.float64]) -> NDArray[np.object_]:
+    return shapely.box(boxes[:, 0], boxes[:, 1], boxes[:, 2], boxes[:, 3])
+
+
+def _concatenated_ranges(starts: NDArray[np.intp], counts: NDArray[np.intp]) -> NDArray[np.intp]:
+    """start[0] .. start[0] + counts[0] - 1, then the same for every start, as one array."""
+    offsets = np.cumsum(counts) - counts
+    return (np.repeat(starts, counts) + np.arange(counts.sum()) - np.repeat(offsets, counts)).astype(np.intp)
+
+
+#: Pieces per bucket of the grid that narrows a block's search to the pieces around it.
+PIECES_PER_BUCKET = 256
+
+
+class _Buckets:
+    """Pieces filed by the cells of a square grid their boxes overlap (a piece across a cell edge is in both)."""
+
+    def __init__(self, boxes: NDArray[np.float64]) -> None:
+        self.side = max(1, math.ceil(math.sqrt(len(boxes) / PIECES_PER_BUCKET)))
+        self.lo = boxes[:, :2].min(axis=0) if len(boxes) else np.zeros(2)
+        extent = (boxes[:, 2:].max(axis=0) - self.lo) if len(boxes) else np.ones(2)
+        self.cell = np.maximum(extent / self.side, 1e-9)
+        cells, piece = self._cells_of(boxes)
+        order = np.argsort(cells, kind="stable")
+        self.pieces = piece[order]
+        self.start = np.searchsorted(cells[order], np.arange(self.side * self.side + 1)).astype(np.intp)
+
+    def _cells_of(self, boxes: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """Every (cell, box index) pair of a cell a box overlaps."""
+        c0 = np.clip(np.floor((boxes[:, :2] - self.lo) / self.cell), 0, self.side - 1).astype(np.intp)
+        c1 = np.clip(np.floor((boxes[:, 2:] - self.lo) / self.cell), 0, self.side - 1).astype(np.intp)
+        nx, ny = c1[:, 0] - c0[:, 0] + 1, c1[:, 1] - c0[:, 1] + 1
+        counts = nx * ny
+        which = np.repeat(np.arange(len(boxes), dtype=np.intp), counts)
+        k = _concatenated_ranges(np.zeros(len(boxes), dtype=np.intp), counts)
+        ix = c0[which, 0] + k % nx[which]
+        iy = c0[which, 1] + k // nx[which]
+        return (iy * self.side + ix).astype(np.intp), which
+
+    def near(self, boxes: NDArray[np.float64]) -> NDArray[np.intp]:
+        """Sorted indices of the pieces filed in any cell that one of ``boxes`` overlaps."""
+        cells = np.unique(self._cells_of(boxes)[0])
+        return np.unique(
+            self.pieces[_concatenated_ranges(self.start[cells], self.start[cells + 1] - self.start[cells])]
+        )
+
+
+def _block(
+    own: NDArray[np.intp],
+    hit: NDArray[np.intp],
+    first: NDArray[np.intp],
+    last: NDArray[np.intp],
+    owner: NDArray[np.intp],
+) -> Block:
+    """A block from its own contours and the pieces that meet theirs: each other contour's stretch is the rows
+    from its first to its last piece met."""
+    hit = np.unique(hit)
+    others = hit[~np.isin(owner[hit], own)]
+    by_owner = others[np.argsort(owner[others], kind="stable")]
+    owners, begin = np.unique(owner[by_owner], return_index=True)
+    rows_from = np.minimum.reduceat(first[by_owner], begin) if len(begin) else np.zeros(0, dtype=np.intp)
+    rows_to = np.maximum.reduceat(last[by_owner], begin) if len(begin) else np.zeros(0, dtype=np.intp)
+    near = np.concatenate([own, owners]).astype(np.intp)
+    order = np.argsort(near, kind="stable")
+    whole = np.full(len(own), -1, dtype=np.intp)
+    return Block(
+        own=own,
+        near=near[order],
+        first=np.concatenate([whole, rows_from]).astype(np.intp)[order],
+        last=np.concatenate([whole, rows_to]).astype(np.intp)[order],
+    )
+
+
+def block_contacts(
+    near: Sequence[CCS | bytes],
+    first: Sequence[int],
+    last: Sequence[int],
+    own: Sequence[int],
+    ladder: NDArray[np.float64],
+    steps: Sequence[int],
+) -> set[tuple[int, int]]:
+    """Pairs (i, j), i < j, of local indices (into ``near``) whose slices meet at some checked step, each with
+    an ``own`` surface in it; each near surface is cut to its rows ``first[i]`` .. ``last[i]`` (-1: whole).
+    The surfaces come as the spool keeps them (:func:`~engine.ccsm.spool.surface_of`): they are opened and
+    cut here, in the worker."""
+    surfaces = []
+    for payload, f, la in zip(near, first, last, strict=True):
+        s = surface_of(payload)
+        surfaces.append(s if f < 0 else replace(s, base=s.base[f : la + 1], top=s.top[f : la + 1]))
+    return new_contact_pairs(surfaces, ladder, steps, set(own))
+
+
+def input_touches(spool: Spool) -> InputTouches:
+    """The input's touching pairs of a spool's surfaces (their base rows), asked pair by pair."""
+    return InputTouches(_SpoolBases(spool))  # type: ignore[arg-type]
+
+
+class _SpoolBases:
+    """The base rows of a spool's surfaces, read when asked: the input lines for :class:`InputTouches`."""
+
+    def __init__(self, spool: Spool) -> None:
+        self.spool = spool
+
+    def __getitem__(self, index: int) -> Coords:
+        return self.spool.get([index])[0].base
+
+
+def _block_tasks(
+    blocks: Sequence[Block], spool: Spool, ladder: NDArray[np.float64], steps: list[int]
+) -> Iterator[tuple[Any, ...]]:
+    """One task per block, each block's surfaces read from the spool only when its task is sent."""
+    for b in blocks:
+        near = spool.get_payloads(b.near.tolist())
+        yield near, b.first.tolist(), b.last.tolist(), np.searchsorted(b.near, b.own).tolist(), ladder, steps
+
+
+def find_crossings_by_block(
+    spool: Spool,
+    boxes: NDArray[np.float64],
+    pieces: PieceIndex,
+    ladder: NDArray[np.float64],
+    steps: Sequence[int],
+    only: set[int] | None = None,
+    executor: Executor | None = None,
+    per_block: int | None = None,
+    touches: InputTouches | None = None,
+) -> set[int]:
+    """Indices of the surfaces in a new contact (with one of ``only``, if given), found block by block:
+    the same answer as :func:`~engine.ccsm.topology.find_new_crossings` over the whole set with the input's
+    touches allowed, with an index per block instead of one over everything.
+
+    Parameters
+    ----------
+    spool
+        The surfaces, numbered 0 .. n - 1; only one block's (times the executor's look-ahead) are read at once.
+    boxes
+        (n, 4) their boxes (:func:`surface_boxes`).
+    pieces
+        Their pieces.
+    ladder, steps
+        As for :func:`~engine.ccsm.topology.find_new_crossings`.
+    only
+        Restrict the search to contacts that involve these surfaces (the ones just rebuilt).
+    executor
+        Where the blocks are checked (a local pool or a Dask cluster); None = this process.
+    per_block
+        Owned contours per block on average; None = :data:`BLOCK_CONTOURS`, or :data:`REBUILT_PER_BLOCK`
+        with ``only``.
+    touches
+        The input's touching pairs, asked pair by pair (kept across calls so each pair is asked once); None =
+        a new one on the spool's base rows.
+    """
+    checked = None if only is None else np.array(sorted(only), dtype=np.intp)
+    if per_block is None:
+        per_block = BLOCK_CONTOURS if only is None else REBUILT_PER_BLOCK
+    blocks = spatial_blocks(boxes, pieces, checked, per_block)
+    touches = touches if touches is not None else input_touches(spool)
+    found: set[int] = set()
+    tasks = _block_tasks(blocks, spool, ladder, list(steps))
+    for block, pairs in zip(blocks, map_ordered(executor, block_contacts, tasks), strict=True):
+        for a, b in pairs:
+            pair = (int(block.near[a]), int(block.near[b]))
+            if pair not in touches:
+                found.update(pair)
+    return found

@@ -1,0 +1,61 @@
+"""Where a build keeps the surfaces it has made until they are written (docs/design.md section 6).
+
+A small build keeps them in memory (:class:`MemorySpool`). A big one keeps them in a scratch file beside the
+store (``engine.store.spool.DiskSpool``), so the build's memory holds only the surfaces of the chunk, block or
+batch at hand, whatever the size of the set: the crossing repair reads back one block's surfaces at a time,
+and the store is written batch by batch from the spool. The method only knows the :class:`Spool` protocol.
+"""
+
+from __future__ import annotations
+
+import pickle
+from collections.abc import Iterator, Sequence
+from typing import Protocol
+
+from engine.ccsm.ccs import CCS
+
+
+class Spool(Protocol):
+    """Built surfaces by their index in the build (0, 1, ... in input order)."""
+
+    def put(self, index: int, surface: CCS) -> None:
+        """Keep ``surface`` as number ``index``, replacing any surface kept under that number."""
+
+    def get(self, indices: Sequence[int]) -> list[CCS]:
+        """The surfaces numbered ``indices``, in that order."""
+
+    def get_payloads(self, indices: Sequence[int]) -> Sequence[CCS | bytes]:
+        """The same surfaces in the form they are kept, for a worker to open with :func:`surface_of`."""
+
+    def close(self) -> None:
+        """Free what the spool holds."""
+
+
+class MemorySpool:
+    """Surfaces held in memory: for sets small enough to hold (simplify, evaluate, tests)."""
+
+    def __init__(self) -> None:
+        self._surfaces: dict[int, CCS] = {}
+
+    def put(self, index: int, surface: CCS) -> None:  # noqa: D102
+        self._surfaces[index] = surface
+
+    def get(self, indices: Sequence[int]) -> list[CCS]:  # noqa: D102
+        return [self._surfaces[int(i)] for i in indices]
+
+    def get_payloads(self, indices: Sequence[int]) -> list[CCS]:  # noqa: D102
+        return self.get(indices)
+
+    def close(self) -> None:  # noqa: D102
+        self._surfaces.clear()
+
+
+def surface_of(payload: CCS | bytes) -> CCS:
+    """A surface from what :meth:`Spool.get_payloads` gave (a pickle from a spool on disk)."""
+    return pickle.loads(payload) if isinstance(payload, bytes) else payload
+
+
+def in_batches(spool: Spool, count: int, size: int) -> Iterator[list[CCS]]:
+    """Surfaces 0 .. count - 1 of ``spool``, ``size`` at a time, in order."""
+    for start in range(0, count, size):
+        yield spool.get(range(start, min(count, start + size)))

@@ -1,0 +1,131 @@
+"""The crossing repair block by block (issue 12 item 2): the same contacts, the same decisions as over the whole set."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import shapely
+from numpy.testing import assert_array_equal
+
+import engine.ccsm.blocks as blocks
+from engine.ccsm.blocks import PieceIndex, find_crossings_by_block, spatial_blocks, surface_boxes
+from engine.ccsm.build import BuiltSet, build_contour_set, checked_ladder_steps
+from engine.ccsm.ccs import CCS
+from engine.ccsm.spool import MemorySpool
+from engine.ccsm.topology import InputTouches, find_new_crossings
+from engine.params import BuildParams
+from engine.types import Contour, ContourSet
+
+
+def ring_clusters(side: int = 3, rings: int = 5, seed: int = 7) -> ContourSet:
+    """``side`` x ``side`` clusters of nested noisy rings 20 m apart (their DP targets cross), 2.1 km apart
+    so the boxes of neighbouring clusters' outer rings overlap: many blocks, and contours reaching into others."""
+    rng = np.random.default_rng(seed)
+    s = np.linspace(0.0, 2 * np.pi, 160, endpoint=False)
+    contours = []
+    for cx in range(side):
+        for cy in range(side):
+            centre = np.array([500_000.0 + 2_100.0 * cx, 4_000_000.0 + 1_300.0 * cy])
+            for k in range(rings):
+                r = 1_000.0 + 20.0 * k + rng.uniform(-6.0, 6.0, len(s))
+                xy = np.column_stack([r * np.cos(s), 0.6 * r * np.sin(s)]) + centre
+                contours.append(Contour(len(contours), 100.0 + 20 * k, xy, closed=True))
+    return ContourSet(contours, "EPSG:32616", "EPSG:32616")
+
+
+@pytest.fixture(scope="module")
+def clusters() -> ContourSet:
+    return ring_clusters()
+
+
+@pytest.fixture(scope="module")
+def unrepaired(clusters: ContourSet) -> BuiltSet:
+    return build_contour_set(clusters, BuildParams(resolve_crossings=False), workers=1)
+
+
+def random_lines(n: int = 300, seed: int = 1) -> list[CCS]:
+    """Random wiggly open lines of 20-80 points whose top rows are their base rows moved a little."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        m = int(rng.integers(20, 80))
+        start = rng.uniform(0, 1_000, 2)
+        base = start + np.cumsum(rng.normal(0, 4, (m, 2)), axis=0)
+        top = base + rng.normal(0, 1, (m, 2))
+        out.append(CCS(i, 0.0, False, base, top, np.zeros(1), np.ones(1), 1.0, m, m))
+    return out
+
+
+def test_every_contour_is_owned_once_and_its_block_holds_every_stretch_that_can_meet_it() -> None:
+    surfaces = random_lines()
+    boxes = surface_boxes(surfaces)
+    pieces = PieceIndex()
+    pieces.put(range(len(surfaces)), surfaces)
+    found = spatial_blocks(boxes, pieces, per_block=8)
+    assert len(found) > 10
+    owners = np.concatenate([b.own for b in found])
+    assert sorted(owners.tolist()) == list(range(len(surfaces)))
+    # Reference: every segment's swept box against every segment of the block's own contours.
+    segments = []
+    for s in surfaces:
+        rows = np.stack([s.base, s.top], axis=1)
+        lo, hi = rows.min(axis=1), rows.max(axis=1)
+        segments.append(shapely.box(*np.minimum(lo[:-1], lo[1:]).T, *np.maximum(hi[:-1], hi[1:]).T))
+    cut_somewhere = False
+    for b in found:
+        own_segments = np.concatenate([segments[i] for i in b.own])
+        tree = shapely.STRtree(own_segments)
+        stretch = {int(i): (int(f), int(la)) for i, f, la in zip(b.near, b.first, b.last, strict=True)}
+        for j in set(range(len(surfaces))) - set(b.own.tolist()):
+            touching = np.flatnonzero([len(tree.query(g)) > 0 for g in segments[j]])
+            if not len(touching):
+                continue
+            assert j in stretch, f"contour {j} reaches block {b.own[:3]} but is not near it"
+            first, last = stretch[j]
+            assert first <= touching[0] and touching[-1] + 1 <= last
+            cut_somewhere |= last - first + 1 < len(surfaces[j].base)
+    assert cut_somewhere  # the stretches really are cut to the blocks
+
+
+def test_blocks_find_the_same_contacts_as_the_whole_set(unrepaired: BuiltSet) -> None:
+    surfaces = unrepaired.surfaces
+    ladder = unrepaired.model.ladder
+    steps = checked_ladder_steps(unrepaired.model)
+    whole = find_new_crossings(surfaces, ladder, steps, InputTouches([s.at(0.0) for s in surfaces]))
+    assert len(whole) > 10  # the DP targets of the rings cross: there is something to find
+    spool = MemorySpool()
+    for i, s in enumerate(surfaces):
+        spool.put(i, s)
+    boxes = surface_boxes(surfaces)
+    pieces = PieceIndex()
+    pieces.put(range(len(surfaces)), surfaces)
+    assert find_crossings_by_block(spool, boxes, pieces, ladder, steps, per_block=4) == whole
+    only = set(range(0, len(surfaces), 3))
+    with_only = find_new_crossings(surfaces, ladder, steps, InputTouches([s.at(0.0) for s in surfaces]), only)
+    assert find_crossings_by_block(spool, boxes, pieces, ladder, steps, only, per_block=4) == with_only
+
+
+@pytest.fixture(scope="module")
+def repaired_whole(clusters: ContourSet) -> BuiltSet:
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(blocks, "BLOCK_CONTOURS", 10**9)  # one block: the whole set at once
+        return build_contour_set(clusters, BuildParams(), workers=1)
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_repair_by_small_blocks_makes_the_surfaces_of_the_repair_over_the_whole_set(
+    clusters: ContourSet, repaired_whole: BuiltSet, workers: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(blocks, "BLOCK_CONTOURS", 4)
+    by_block = build_contour_set(clusters, BuildParams(), workers=workers)
+    assert repaired_whole.repaired > 10
+    assert by_block.repaired == repaired_whole.repaired
+    for a, b in zip(by_block.surfaces, repaired_whole.surfaces, strict=True):
+        assert_array_equal(a.base, b.base)
+        assert_array_equal(a.top, b.top)
+        assert_array_equal(a.t_at_scale, b.t_at_scale)
+    surfaces, model = by_block.surfaces, by_block.model
+    left = find_new_crossings(
+        surfaces, model.ladder, checked_ladder_steps(model), InputTouches([s.at(0.0) for s in surfaces])
+    )
+    assert left == set()

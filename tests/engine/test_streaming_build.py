@@ -1,0 +1,187 @@
+"""The streaming build (issue 12 item 2): surfaces wait in a scratch file, not in memory; chunks and blocks are
+read lazily; the scratch file never outlives its build; the result is the in-memory build's, row for row."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+
+import engine.ccsm.blocks as blocks
+import engine.serve.datasets as datasets
+from engine.ccsm.build import build_contour_set, build_into
+from engine.ccsm.spool import MemorySpool
+from engine.errors import StoreError
+from engine.parallel import map_ordered
+from engine.params import BuildParams
+from engine.serve.datasets import SourceSpec, build_dataset
+from engine.store.spool import SPOOL_PREFIX, DiskSpool, remove_stale_spools
+from engine.store.sqlite import CCSStore, host_name
+from tests.app.conftest import write_geojson
+from tests.engine.test_blocks import ring_clusters
+
+
+class CountingSpool(MemorySpool):
+    """A memory spool that records how many surfaces each read asks for."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.reads: list[int] = []
+
+    def get(self, indices):  # noqa: ANN001, ANN201 - the Spool protocol's
+        indices = list(indices)
+        self.reads.append(len(indices))
+        return super().get(indices)
+
+
+def test_map_ordered_reads_its_tasks_lazily_and_keeps_a_bounded_number_in_flight() -> None:
+    pulled = []
+    in_flight_max = [0]
+    running = [0]
+    lock = threading.Lock()
+
+    def tasks():
+        for i in range(40):
+            pulled.append(i)
+            yield (i,)
+
+    def work(i: int) -> int:
+        with lock:
+            running[0] += 1
+            in_flight_max[0] = max(in_flight_max[0], len(pulled) - i)
+        with lock:
+            running[0] -= 1
+        return i * i
+
+    with ThreadPoolExecutor(4) as pool:
+        results = map_ordered(pool, work, tasks(), ahead=3)
+        assert pulled == []  # nothing is read before the first result is asked for
+        assert next(results) == 0
+        assert len(pulled) == 3
+        assert list(results) == [i * i for i in range(1, 40)]
+    assert in_flight_max[0] <= 3
+
+
+def test_the_repair_reads_back_one_block_at_a_time_and_decides_as_the_whole_set(monkeypatch) -> None:
+    clusters = ring_clusters()
+    whole = build_contour_set(clusters, BuildParams(), workers=1)
+    monkeypatch.setattr(blocks, "BLOCK_CONTOURS", 5)
+    monkeypatch.setattr(blocks, "REBUILT_PER_BLOCK", 5)
+    spool = CountingSpool()
+    spooled = build_into(spool, clusters, BuildParams(), workers=1)
+    assert spooled.repaired == whole.repaired > 10
+    n = spooled.count
+    # Every read during the build is one block's surfaces (5 own and their near stretches) or one pair's
+    # input touch test: never the set, which only the final read in order takes.
+    assert spool.reads and max(spool.reads) < n / 2, spool.reads
+    for a, b in zip(spool.get(range(n)), whole.surfaces, strict=True):
+        assert_array_equal(a.base, b.base)
+        assert_array_equal(a.top, b.top)
+
+
+@pytest.fixture(scope="module")
+def clusters_source(tmp_path_factory) -> Path:
+    """The ring clusters as a GeoJSON file (WGS 84), so they go through the store build."""
+    from pyproj import Transformer
+
+    to_wgs84 = Transformer.from_crs("EPSG:32616", "EPSG:4326", always_xy=True)
+    features = []
+    for c in ring_clusters().contours:
+        lon, lat = to_wgs84.transform(*np.vstack([c.coords, c.coords[:1]]).T)
+        features.append(
+            {
+                "type": "Feature",
+                "properties": {"id": f"r{c.id}", "elevation": float(c.elevation)},
+                "geometry": {"type": "LineString", "coordinates": np.column_stack([lon, lat]).tolist()},
+            }
+        )
+    return write_geojson(tmp_path_factory.mktemp("clusters") / "clusters.geojson", features)
+
+
+def stored_rows(store: CCSStore, dataset: str) -> list[tuple]:
+    rows = store._con().execute(
+        "SELECT contour_id, elevation, base, top, original, t_at_scale, sim, sig, vanish_scale FROM contours "
+        "WHERE dataset=? ORDER BY fid",
+        (dataset,),
+    )
+    return [tuple(r) for r in rows]
+
+
+def test_a_store_build_through_the_scratch_file_writes_the_rows_of_an_in_memory_build(
+    tmp_path, clusters_source, monkeypatch
+) -> None:
+    store = CCSStore(tmp_path / "s.sqlite")
+    info, _ = build_dataset(store, SourceSpec(clusters_source, "c", "c"), workers=2)
+    assert info.n_contours == 45
+    streamed = stored_rows(store, "c")
+
+    class InMemory(MemorySpool):
+        def __init__(self, directory) -> None:  # noqa: ANN001 - DiskSpool's signature
+            super().__init__()
+
+    monkeypatch.setattr(datasets, "DiskSpool", InMemory)
+    build_dataset(store, SourceSpec(clusters_source, "m", "m"), workers=1)
+    assert stored_rows(store, "m") == streamed
+    assert not list(tmp_path.glob(f"{SPOOL_PREFIX}*"))  # the scratch file went with its build
+
+
+def test_a_failing_build_removes_its_scratch_file_and_keeps_the_stored_version(
+    tmp_path, clusters_source, monkeypatch
+) -> None:
+    store = CCSStore(tmp_path / "s.sqlite")
+    build_dataset(store, SourceSpec(clusters_source, "c", "c"), workers=1)
+    before = stored_rows(store, "c")
+    seen = []
+
+    def fail(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        seen.extend(tmp_path.glob(f"{SPOOL_PREFIX}*"))
+        raise MemoryError("killed while writing")
+
+    monkeypatch.setattr(datasets, "contour_rows", fail)
+    with pytest.raises(MemoryError):
+        build_dataset(store, SourceSpec(clusters_source, "c", "c"), workers=1, force=True)
+    assert len(seen) == 1 and seen[0].parent == tmp_path  # the scratch file was beside the store
+    assert not list(tmp_path.glob(f"{SPOOL_PREFIX}*"))
+    assert stored_rows(CCSStore(tmp_path / "s.sqlite"), "c") == before
+
+
+def test_scratch_files_of_dead_builds_are_removed_and_those_of_live_ones_kept(tmp_path) -> None:
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead_pid = int(dead.stdout)
+    stale = tmp_path / f"{SPOOL_PREFIX}{host_name()}-{dead_pid}-abcd.sqlite"
+    live = tmp_path / f"{SPOOL_PREFIX}{host_name()}-{os.getpid()}-efgh.sqlite"
+    other_host = tmp_path / f"{SPOOL_PREFIX}elsewhere-{dead_pid}-ijkl.sqlite"
+    for path in (stale, live, other_host):
+        path.write_bytes(b"x")
+    spool = DiskSpool(tmp_path)  # a new build sweeps first
+    try:
+        assert not stale.exists()
+        assert live.exists() and other_host.exists()
+        assert spool.path.name.startswith(f"{SPOOL_PREFIX}{host_name()}-{os.getpid()}-")
+    finally:
+        spool.close()
+    assert not spool.path.exists()
+    assert remove_stale_spools(tmp_path) == []
+
+
+def test_a_scratch_file_that_cannot_be_made_is_a_clear_store_error(tmp_path) -> None:
+    locked = tmp_path / "ro"
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        if os.access(locked, os.W_OK):  # root ignores the mode: make the directory a file's path instead
+            locked.chmod(0o700)
+            locked.rmdir()
+            locked.write_text("not a directory")
+        with pytest.raises(StoreError, match="scratch file"):
+            DiskSpool(locked)
+    finally:
+        if locked.is_dir():
+            locked.chmod(0o700)
