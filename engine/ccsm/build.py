@@ -191,7 +191,7 @@ def build_into(
     """Build the CCS of every contour of ``contour_set`` into ``spool``, then repair crossings block by block.
 
     Surfaces go to the spool as their chunks come back, and the repair reads one block's surfaces at a time,
-    so with a :class:`~engine.ccsm.spool.DiskSpool` the build holds the input contours and a few chunks and
+    so with a spool on disk (``engine.store.spool.DiskSpool``) the build holds the input contours and a few chunks and
     blocks, not every surface (docs/design.md section 6).
 
     Parameters
@@ -231,7 +231,7 @@ def build_into(
             surfaces = [(start + k, r) for k, r in enumerate(results) if isinstance(r, CCS)]
             failed.extend(r for r in results if isinstance(r, BadFeature))
             numbered = [(len(built) + k, s) for k, (_, s) in enumerate(surfaces)]
-            _put_all(spool, numbered)
+            spool.put_many(numbered)
             pieces.put([k for k, _ in numbered], [s for _, s in numbered])
             built.extend(i for i, _ in surfaces)
             boxes.extend(s.bounds for _, s in surfaces)
@@ -271,16 +271,6 @@ def _usable(contours: Sequence[Contour]) -> tuple[list[Contour], list[BadFeature
         else:
             usable.append(contour)
     return usable, rejected
-
-
-def _put_all(spool: Spool, items: list[tuple[int, CCS]]) -> None:
-    """Keep surfaces in the spool, in one statement where the spool can."""
-    put_many = getattr(spool, "put_many", None)
-    if put_many is not None:
-        put_many(items)
-    else:
-        for i, s in items:
-            spool.put(i, s)
 
 
 #: Contours per rebuild task of the crossing repair: a round rebuilds a few hundred at most.

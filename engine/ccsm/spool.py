@@ -9,7 +9,7 @@ and the store is written batch by batch from the spool. The method only knows th
 from __future__ import annotations
 
 import pickle
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from typing import Protocol
 
 from engine.ccsm.ccs import CCS
@@ -20,6 +20,9 @@ class Spool(Protocol):
 
     def put(self, index: int, surface: CCS) -> None:
         """Keep ``surface`` as number ``index``, replacing any surface kept under that number."""
+
+    def put_many(self, items: Iterable[tuple[int, CCS]]) -> None:
+        """Keep several (number, surface) at once."""
 
     def get(self, indices: Sequence[int]) -> list[CCS]:
         """The surfaces numbered ``indices``, in that order."""
@@ -39,6 +42,9 @@ class MemorySpool:
 
     def put(self, index: int, surface: CCS) -> None:  # noqa: D102
         self._surfaces[index] = surface
+
+    def put_many(self, items: Iterable[tuple[int, CCS]]) -> None:  # noqa: D102
+        self._surfaces.update(items)
 
     def get(self, indices: Sequence[int]) -> list[CCS]:  # noqa: D102
         return [self._surfaces[int(i)] for i in indices]
