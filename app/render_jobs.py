@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import signal
 import time
 from dataclasses import dataclass, replace
@@ -19,6 +18,7 @@ from typing import Any
 
 from app.compression import gzip_body, worth_compressing
 from engine.errors import CCSMError, UnknownLayer
+from engine.parallel import lower_priority as lower_process_priority
 from engine.serve.cache import LRUCache
 from engine.serve.relief import ReliefCache
 from engine.serve.renderer import Renderer, TileOptions
@@ -41,12 +41,8 @@ HEAVY_NICENESS = 10
 
 def lower_priority(niceness: int) -> None:
     """Add ``niceness`` to this process's; background work (``niceness`` at HEAVY_NICENESS or more: the heavy
-    lane, upload checks) also takes Linux's idle scheduling class, where it runs only on a core no other
-    process wants and gives the core up the moment a map tile's worker wakes (a nice process may finish its
-    time slice first), so it cannot lengthen a map tile's render by sharing its core."""
-    os.nice(niceness)
-    if niceness >= HEAVY_NICENESS and hasattr(os, "SCHED_IDLE"):
-        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    lane, upload checks) also takes the idle scheduling class (:func:`engine.parallel.lower_priority`)."""
+    lower_process_priority(niceness, idle=niceness >= HEAVY_NICENESS)
 
 
 #: Niceness of the morph lane's workers: morph tiles are map tiles too (the plugin's), so they share the light

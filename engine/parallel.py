@@ -103,6 +103,16 @@ def map_ordered(
         yield pending.popleft().result()
 
 
+def lower_priority(niceness: int, *, idle: bool = False) -> None:
+    """Add ``niceness`` to this process's; with ``idle``, also take Linux's idle scheduling class, where the
+    process runs only on a core no other process wants and gives it up the moment one does (a nice process
+    may finish its time slice first). Background work (builds, upload checks, the heavy render lane) takes
+    it so that it cannot lengthen a map tile's render by sharing its core."""
+    os.nice(niceness)
+    if idle and hasattr(os, "SCHED_IDLE"):
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+
+
 def cores() -> int:
     """Cores this process may use."""
     try:

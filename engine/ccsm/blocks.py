@@ -25,7 +25,7 @@ import shapely
 from numpy.typing import NDArray
 
 from engine.ccsm.spool import Spool, surface_of
-from engine.ccsm.topology import InputTouches, new_contact_pairs, per_piece, piece_ranges
+from engine.ccsm.topology import InputTouches, concatenated_ranges, new_contact_pairs, per_piece, piece_ranges
 from engine.parallel import map_ordered
 from engine.types import Coords
 
@@ -169,7 +169,7 @@ def spatial_blocks(
     blocks = []
     for group in np.split(owned[order], np.flatnonzero(np.diff(key[order])) + 1):
         own = np.sort(group)
-        own_pieces = _concatenated_ranges(start[own], start[own + 1] - start[own])
+        own_pieces = concatenated_ranges(start[own], start[own + 1] - start[own])
         # A tree of the pieces near this block only: one tree of every piece of a big set would hold a
         # geometry per piece at once (hundreds of MB at a few million vertices).
         candidates = buckets.near(piece_boxes[own_pieces])
@@ -181,12 +181,6 @@ def spatial_blocks(
 
 def _boxes(boxes: NDArray[np.float64]) -> NDArray[np.object_]:
     return shapely.box(boxes[:, 0], boxes[:, 1], boxes[:, 2], boxes[:, 3])
-
-
-def _concatenated_ranges(starts: NDArray[np.intp], counts: NDArray[np.intp]) -> NDArray[np.intp]:
-    """start[0] .. start[0] + counts[0] - 1, then the same for every start, as one array."""
-    offsets = np.cumsum(counts) - counts
-    return (np.repeat(starts, counts) + np.arange(counts.sum()) - np.repeat(offsets, counts)).astype(np.intp)
 
 
 #: Pieces per bucket of the grid that narrows a block's search to the pieces around it.
@@ -213,7 +207,7 @@ class _Buckets:
         nx, ny = c1[:, 0] - c0[:, 0] + 1, c1[:, 1] - c0[:, 1] + 1
         counts = nx * ny
         which = np.repeat(np.arange(len(boxes), dtype=np.intp), counts)
-        k = _concatenated_ranges(np.zeros(len(boxes), dtype=np.intp), counts)
+        k = concatenated_ranges(np.zeros(len(boxes), dtype=np.intp), counts)
         ix = c0[which, 0] + k % nx[which]
         iy = c0[which, 1] + k // nx[which]
         return (iy * self.side + ix).astype(np.intp), which
@@ -222,7 +216,7 @@ class _Buckets:
         """Sorted indices of the pieces filed in any cell that one of ``boxes`` overlaps."""
         cells = np.unique(self._cells_of(boxes)[0])
         return np.unique(
-            self.pieces[_concatenated_ranges(self.start[cells], self.start[cells + 1] - self.start[cells])]
+            self.pieces[concatenated_ranges(self.start[cells], self.start[cells + 1] - self.start[cells])]
         )
 
 

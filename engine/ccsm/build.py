@@ -64,6 +64,10 @@ class BuiltSet:
     interval: float | None = None
     repaired: int = 0
 
+    def surfaces_in_batches(self, size: int) -> Iterator[list[CCS]]:
+        """The surfaces in input order, ``size`` at a time (as :meth:`SpooledSet.surfaces_in_batches`)."""
+        return (self.surfaces[i : i + size] for i in range(0, len(self.surfaces), size))
+
 
 def vanish_scale(ccs: CCS, model: ScaleModel) -> float:
     """Smallest scale denominator at which a ring is too small to show (docs/design.md section 4); inf for lines.

@@ -237,11 +237,20 @@ def sweep_contacts(
     return SweepIndex.of(start, end, only).contacts(np.zeros(n), np.ones(n))
 
 
+def concatenated_ranges(starts: NDArray[np.integer], counts: NDArray[np.integer]) -> NDArray[np.intp]:
+    """starts[0] .. starts[0] + counts[0] - 1, then the same for every start, as one array.
+
+    >>> concatenated_ranges(np.array([5, 0]), np.array([2, 3])).tolist()
+    [5, 6, 0, 1, 2]
+    """
+    offsets = np.cumsum(counts) - counts
+    return (np.repeat(starts, counts) + np.arange(counts.sum()) - np.repeat(offsets, counts)).astype(np.intp)
+
+
 def _points_of(first: NDArray[np.intp], last: NDArray[np.intp]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     """Indices of the points first[i]..last[i] of every piece, in order, and each piece's point count."""
-    counts = last - first + 1
-    point = np.repeat(first, counts) + np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-    return point.astype(np.intp), counts.astype(np.intp)
+    counts = (last - first + 1).astype(np.intp)
+    return concatenated_ranges(first, counts), counts
 
 
 def _close_enough(

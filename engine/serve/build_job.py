@@ -25,6 +25,7 @@ from typing import Any
 from engine.cartography.options import PARAMS_KEY, CartographyOptions
 from engine.errors import BuildCancelled, CCSMError
 from engine.io.source import read_source
+from engine.parallel import lower_priority
 from engine.serve.datasets import RELIEF_DEM_KEY, SourceSpec, build_and_save, build_dataset, build_lock
 from engine.store.sqlite import CCSStore
 
@@ -166,9 +167,7 @@ def _die_with_parent() -> None:
 def main() -> None:
     """Entry point: one JSON job on stdin."""
     _die_with_parent()
-    os.nice(BUILD_NICENESS)
-    if hasattr(os, "SCHED_IDLE"):  # a core no map tile wants (as app.render_jobs.lower_priority)
-        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    lower_priority(BUILD_NICENESS, idle=True)  # a core no map tile wants
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     sys.exit(run(BuildJob.from_json(sys.stdin.readline())))
 

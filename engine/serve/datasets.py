@@ -254,11 +254,7 @@ def _rows_in_batches(built: BuiltSet | SpooledSet, contours: Sequence[Contour]) 
     """The store rows of ``built``, made :data:`SAVE_BATCH` surfaces at a time (a spooled set reads only that
     batch of surfaces from its spool)."""
     by_key = {(c.id, float(c.elevation), c.n_vertices): c for c in contours}
-    if isinstance(built, SpooledSet):
-        batches = built.surfaces_in_batches(SAVE_BATCH)
-    else:
-        batches = (built.surfaces[i : i + SAVE_BATCH] for i in range(0, len(built.surfaces), SAVE_BATCH))
-    for batch in batches:
+    for batch in built.surfaces_in_batches(SAVE_BATCH):
         keys = ((s.contour_id, float(s.elevation), int(s.n_input_vertices)) for s in batch)
         inputs = [by_key[k] for k in keys if k in by_key]
         yield from contour_rows(batch, built.working_crs, inputs)
