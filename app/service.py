@@ -25,10 +25,11 @@ from app.uploads import INCOMING_PREFIX
 from engine.cartography.options import PARAMS_KEY as CARTOGRAPHY_KEY
 from engine.cartography.options import CartographyOptions
 from engine.errors import CCSMError, StoreError, StoreNotReady, StoreUnwritable, UnknownLayer
+from engine.scratch import pid_alive
 from engine.serve.build_job import BuildJob
 from engine.serve.datasets import RELIEF_DEM_KEY, SourceSpec, build_lock, slugify, source_hash
 from engine.serve.renderer import Renderer, TileOptions
-from engine.store.sqlite import CCSStore, DatasetInfo, pid_alive
+from engine.store.sqlite import CCSStore, DatasetInfo
 from engine.tiles.grid import mercator_to_lonlat
 from engine.tiles.scale import zoom_for_scale
 

@@ -51,19 +51,18 @@ def build_stores() -> tuple[Path, Path]:
     t0 = time.perf_counter()
     built = build_contour_set(cs)
     print(f"build of the sample: {time.perf_counter() - t0:.1f} s ({len(built.surfaces)} contours)")
-    save_built(CCSStore(one), "sample", built, cs.contours, name="sample", source="sample", digest="1x", params={})
-    surfaces, contours = [], []
+    save_built(CCSStore(one), "sample", built, name="sample", source="sample", digest="1x", params={})
+    surfaces, inputs = [], []
     for i in range(4):
         for j in range(4):
             off = np.array([i * 40_000.0, j * 40_000.0])
-            for s in built.surfaces:
+            for s, c in zip(built.surfaces, built.inputs, strict=True):
                 surfaces.append(
                     dataclasses.replace(s, contour_id=f"{i}{j}:{s.contour_id}", base=s.base + off, top=s.top + off)
                 )
-            for c in cs.contours:
-                contours.append(Contour(f"{i}{j}:{c.id}", c.elevation, c.coords + off, c.closed))
-    big = dataclasses.replace(built, surfaces=surfaces)
-    save_built(CCSStore(many), "sample", big, contours, name="sample16", source="sample", digest="16x", params={})
+                inputs.append(Contour(f"{i}{j}:{c.id}", c.elevation, c.coords + off, c.closed))
+    big = dataclasses.replace(built, surfaces=surfaces, inputs=inputs)
+    save_built(CCSStore(many), "sample", big, name="sample16", source="sample", digest="16x", params={})
     return one, many
 
 

@@ -13,8 +13,9 @@ similarity through the regression model, and the similarity to ``t`` through the
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Literal, NamedTuple, TypeAlias, get_args
+from typing import Literal, NamedTuple, TypeAlias, get_args, overload
 
 import numpy as np
 from numpy.typing import NDArray
@@ -66,6 +67,43 @@ class Contour:
         return int(self.coords.shape[0])
 
 
+class ContourSubset(Sequence[Contour]):
+    """The contours at ``positions`` (increasing) of a sequence, each read from it when asked: the usable
+    contours of a set whose contours wait on disk (``engine.io.scratch``). A slice costs one slice of the
+    underlying sequence, so reading in chunks stays one read per chunk.
+    """
+
+    #: Contours read at a time when iterated.
+    BATCH = 512
+
+    def __init__(self, contours: Sequence[Contour], positions: Sequence[int]) -> None:
+        self.contours = contours
+        self.positions = [int(p) for p in positions]
+
+    def __len__(self) -> int:
+        return len(self.positions)
+
+    @overload
+    def __getitem__(self, index: int) -> Contour: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> list[Contour]: ...
+
+    def __getitem__(self, index: int | slice) -> Contour | list[Contour]:
+        if isinstance(index, slice):
+            wanted = self.positions[index]
+            if not wanted:
+                return []
+            lo, hi = min(wanted), max(wanted)
+            span = self.contours[lo : hi + 1]
+            return [span[p - lo] for p in wanted]
+        return self.contours[self.positions[index]]
+
+    def __iter__(self) -> Iterator[Contour]:
+        for start in range(0, len(self), self.BATCH):
+            yield from self[start : start + self.BATCH]
+
+
 @dataclass(frozen=True)
 class BadFeature:
     """A feature that could not be used, and why (``where`` names the file or layer it came from)."""
@@ -93,7 +131,7 @@ class ContourSet:
         A human name for the set (file stem by default).
     """
 
-    contours: list[Contour]
+    contours: Sequence[Contour]
     working_crs: str
     source_crs: str
     bad_features: list[BadFeature] = field(default_factory=list)

@@ -75,7 +75,7 @@ def _render_one_tile(ring: np.ndarray, line: np.ndarray) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         store = CCSStore(Path(tmp) / "warmup.sqlite")
         try:
-            info = save_built(store, "warmup", built, contours, name="warmup", source="warmup", digest="0", params={})
+            info = save_built(store, "warmup", built, name="warmup", source="warmup", digest="0", params={})
             z, x, y = tiles_covering(Bounds(*info.bounds_3857), 12)[0]
             renderer = Renderer(store)
             for method in ("ccsm", "original"):

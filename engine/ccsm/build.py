@@ -25,7 +25,7 @@ from engine.geom.polyline import ring_areas
 from engine.parallel import local_pool, map_ordered
 from engine.params import BuildParams
 from engine.tolerances import MIN_VISIBLE_RING_SIDE_M
-from engine.types import BadFeature, Contour, ContourSet
+from engine.types import BadFeature, Contour, ContourSet, ContourSubset
 
 #: Called with (contours done, contours in total) as the build goes.
 ProgressCallback = Callable[[int, int], None]
@@ -52,6 +52,8 @@ class BuiltSet:
         Input features left out by the reader or the build, each with its reason.
     repaired
         Contours rebuilt with a finer target so that their slices cross no other contour.
+    inputs
+        The input contour of each surface, in the same order (what the store keeps as the original).
     """
 
     surfaces: list[CCS]
@@ -63,10 +65,13 @@ class BuiltSet:
     name: str = "contours"
     interval: float | None = None
     repaired: int = 0
+    inputs: Sequence[Contour] = ()
 
-    def surfaces_in_batches(self, size: int) -> Iterator[list[CCS]]:
-        """The surfaces in input order, ``size`` at a time (as :meth:`SpooledSet.surfaces_in_batches`)."""
-        return (self.surfaces[i : i + size] for i in range(0, len(self.surfaces), size))
+    def surfaces_in_batches(self, size: int) -> Iterator[tuple[list[CCS], list[Contour]]]:
+        """The surfaces in input order with their input contours, ``size`` at a time (as
+        :meth:`SpooledSet.surfaces_in_batches`)."""
+        for i in range(0, len(self.surfaces), size):
+            yield self.surfaces[i : i + size], list(self.inputs[i : i + size])
 
 
 def vanish_scale(ccs: CCS, model: ScaleModel) -> float:
@@ -133,10 +138,12 @@ def default_workers() -> int:
 @dataclass
 class SpooledSet:
     """A built set whose surfaces are in a spool (:mod:`engine.ccsm.spool`), numbered 0 .. ``count`` - 1 in
-    input order: what :func:`build_into` returns, to be written batch by batch. The other attributes are
+    input order: what :func:`build_into` returns, to be written batch by batch. ``inputs`` are their input
+    contours, read when asked (from the reader's scratch file for a big source). The other attributes are
     those of :class:`BuiltSet`."""
 
     spool: Spool
+    inputs: Sequence[Contour]
     count: int
     model: ScaleModel
     params: BuildParams
@@ -147,9 +154,11 @@ class SpooledSet:
     interval: float | None
     repaired: int
 
-    def surfaces_in_batches(self, size: int) -> Iterator[list[CCS]]:
-        """The surfaces in input order, ``size`` at a time (only one batch is read into memory)."""
-        return in_batches(self.spool, self.count, size)
+    def surfaces_in_batches(self, size: int) -> Iterator[tuple[list[CCS], list[Contour]]]:
+        """The surfaces in input order with their input contours, ``size`` at a time (only one batch of each
+        is read into memory)."""
+        for start, surfaces in zip(range(0, self.count, size), in_batches(self.spool, self.count, size), strict=True):
+            yield surfaces, list(self.inputs[start : start + size])
 
 
 def build_contour_set(
@@ -180,6 +189,7 @@ def build_contour_set(
         name=spooled.name,
         interval=spooled.interval,
         repaired=spooled.repaired,
+        inputs=list(spooled.inputs),
     )
 
 
@@ -215,7 +225,9 @@ def build_into(
         None = a local pool of ``workers`` processes, or this process.
     """
     params = params or BuildParams()
-    contours, rejected = _usable(contour_set.contours)
+    usable, rejected = _usable(contour_set.contours)
+    # The usable contours are read from the set when a chunk needs them: a big source's wait on disk.
+    contours = ContourSubset(contour_set.contours, usable)
     model, labels = fit_scale_model(contours, params)
     workers = default_workers() if workers is None else max(1, workers)
     starts = range(0, len(contours), CHUNK)
@@ -241,15 +253,16 @@ def build_into(
             boxes.extend(s.bounds for _, s in surfaces)
             if progress:
                 progress(min(start + CHUNK, total), total)
+        inputs = ContourSubset(contours, built)  # the input of each surface, by its number
         repaired = 0
         if params.resolve_crossings and params.target_mode == "scale" and built:
             with threadpool_limits(1):
-                inputs = [contours[i] for i in built]
                 repaired = resolve_crossings(
                     spool, np.array(boxes), pieces, inputs, labels[built].tolist(), params, model, pool
                 )
     return SpooledSet(
         spool=spool,
+        inputs=inputs,
         count=len(built),
         model=model,
         params=params,
@@ -262,18 +275,18 @@ def build_into(
     )
 
 
-def _usable(contours: Sequence[Contour]) -> tuple[list[Contour], list[BadFeature]]:
-    """The contours a CCS can be built from, and the others with the reason. Checked before anything is
-    built: one unusable contour must not break the grouping of the others."""
-    usable: list[Contour] = []
+def _usable(contours: Sequence[Contour]) -> tuple[list[int], list[BadFeature]]:
+    """The positions of the contours a CCS can be built from, and the others with the reason. Checked before
+    anything is built: one unusable contour must not break the grouping of the others."""
+    usable: list[int] = []
     rejected: list[BadFeature] = []
-    for contour in contours:
+    for k, contour in enumerate(contours):
         try:
             check_contour(contour)
         except CCSMError as exc:
             rejected.append(BadFeature(contour.id, str(exc)))
         else:
-            usable.append(contour)
+            usable.append(k)
     return usable, rejected
 
 

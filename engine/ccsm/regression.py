@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -116,7 +117,7 @@ def t_for_scale(ladder: NDArray[np.float64], t_at_scale: NDArray[np.float64], sc
     return float(np.interp(np.log(scale), np.log(ladder), t_at_scale, left=0.0, right=1.0))
 
 
-def group_features(contours: list[Contour]) -> NDArray[np.float64]:
+def group_features(contours: Sequence[Contour]) -> NDArray[np.float64]:
     """(n, 2) size and shape of each contour: log10 length, and sinuosity (length / extent diagonal)."""
     feats = np.empty((len(contours), 2))
     for i, c in enumerate(contours):
@@ -127,7 +128,7 @@ def group_features(contours: list[Contour]) -> NDArray[np.float64]:
 
 
 def assign_groups(
-    contours: list[Contour], n_groups: int, seed: int = 0
+    contours: Sequence[Contour], n_groups: int, seed: int = 0
 ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     """Group contours by size and shape.
 
@@ -158,7 +159,7 @@ def assign_groups(
 
 
 def reference_sets(
-    contours: list[Contour], labels: NDArray[np.intp], references: NDArray[np.intp], per_group: int
+    contours: Sequence[Contour], labels: NDArray[np.intp], references: NDArray[np.intp], per_group: int
 ) -> list[list[Contour]]:
     """Up to ``per_group`` members of each group nearest its reference contour in size and shape."""
     feats = group_features(contours)
@@ -215,7 +216,7 @@ def fit_group_model(references: list[Contour], params: BuildParams) -> GroupMode
     return GroupModel(coefficients=coefficients, reference_id=references[0].id, scales=scales, similarities=y)  # type: ignore[arg-type]
 
 
-def fit_scale_model(contours: list[Contour], params: BuildParams) -> tuple[ScaleModel, NDArray[np.intp]]:
+def fit_scale_model(contours: Sequence[Contour], params: BuildParams) -> tuple[ScaleModel, NDArray[np.intp]]:
     """Group the contours and fit one regression per group.
 
     Returns

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import os
 import zipfile
+from collections.abc import Iterator
 from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +21,8 @@ from rasterio.errors import RasterioError
 from engine.errors import InvalidParameter, SourceError
 from engine.intervals import UNIT_NAMES
 from engine.io.crs import WGS84, parse_crs
-from engine.io.vector import LineParts, assemble_contours
+from engine.io.scratch import ReadScratch
+from engine.io.vector import LineParts, assemble_batches, in_batches
 from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
 from engine.types import BadFeature, ContourSet, FeatureId
 
@@ -79,6 +81,7 @@ def contours_from_dem(
     tolerances: Tolerances = DEFAULT_TOLERANCES,
     block: int | None = None,
     executor: Executor | None = None,
+    scratch: ReadScratch | None = None,
 ) -> ContourSet:
     """Trace contour lines from a DEM at every multiple of ``interval``.
 
@@ -97,6 +100,9 @@ def contours_from_dem(
         than ``WINDOWED_ABOVE_CELLS`` cells, else the whole grid at once.
     executor
         Where the windows are traced (see :mod:`engine.parallel`); None = in this process.
+    scratch
+        Where the traced lines and the contours wait (:class:`~engine.io.scratch.ReadScratch`), so that the
+        memory holds one level at a time; None = in memory.
 
     Returns
     -------
@@ -121,19 +127,22 @@ def contours_from_dem(
         # Imported here: the windowed reader builds on this module's tracing functions.
         from engine.io.dem_windows import contour_windows
 
-        parts, crs_wkt = contour_windows(path, float(interval), block=windowed, executor=executor)
-        crs = parse_crs(crs_wkt, where=str(path))
+        levels, header = contour_windows(path, float(interval), block=windowed, executor=executor, scratch=scratch)
+        transform, crs = header.transform, parse_crs(header.crs_wkt, where=str(path))
     else:
         grid = read_dem(path)
-        parts = trace_contours(grid, float(interval), where=path.name)
-        crs = grid.crs
-    return assemble_contours(
-        parts,
+        levels = traced_levels(grid, float(interval), where=path.name)
+        transform, crs = grid.transform, grid.crs
+    # One level at a time: its lines mapped to the grid's CRS and handed on in batches.
+    batches = (batch for lv in levels for batch in in_batches(line_parts_from_traced([lv], transform, path.name)))
+    return assemble_batches(
+        batches,
         source_crs=crs,
         where=path.name,
         name=path.stem,
         tolerances=tolerances,
         interval=float(interval),
+        scratch=scratch,
     )
 
 
@@ -236,8 +245,7 @@ def _first_edge(v_first: float, v_last: float, step: float, n: int, axis: str, p
     if math.isclose(pixels, n - 1, abs_tol=1e-3):
         return v_first - direction * step / 2.0  # the values are the first and last pixel centres
     raise SourceError(
-        f"{path}: {axis} bounds span {pixels:.3f} pixels of {step} for {n} pixels; "
-        "cannot tell the grid's geometry"
+        f"{path}: {axis} bounds span {pixels:.3f} pixels of {step} for {n} pixels; cannot tell the grid's geometry"
     )
 
 
@@ -251,58 +259,54 @@ def contour_levels(zmin: float, zmax: float, interval: float) -> NDArray[np.floa
     last = math.floor(zmax / interval)
     if last - first + 1 > MAX_LEVELS:
         raise InvalidParameter(
-            f"interval {interval} gives {last - first + 1} levels over [{zmin}, {zmax}] "
-            f"(more than {MAX_LEVELS})"
+            f"interval {interval} gives {last - first + 1} levels over [{zmin}, {zmax}] (more than {MAX_LEVELS})"
         )
     # Rounding keeps 0.1 · 3 at 0.3, so elevations and ids read as the user typed the interval.
     return np.round(np.arange(first, last + 1, dtype=np.float64) * interval, 9)
-
-
-def trace_contours(grid: DemGrid, interval: float, *, where: str) -> LineParts:
-    """Trace the contours of a grid with contourpy and map them to the grid's CRS.
-
-    Parameters
-    ----------
-    grid
-        The DEM.
-    interval
-        Contour interval, in the DEM's vertical unit.
-    where
-        File name for messages.
-
-    Returns
-    -------
-    LineParts
-        Lines in the grid's CRS; a closed ring repeats its first vertex at the end, as contourpy returns it.
-
-    Raises
-    ------
-    SourceError
-        The grid has no data or no level falls within its range.
-    """
-    z = grid.z
-    if z.count() == 0:
-        raise SourceError(f"{where}: the DEM has no valid heights")
-    zmin, zmax = float(z.min()), float(z.max())
-    traced = trace_levels(z, contour_levels(zmin, zmax, interval))
-    if not traced:
-        raise SourceError(
-            f"{where}: no contour at interval {interval:g} within the DEM's range [{zmin:g}, {zmax:g}]"
-        )
-    return line_parts_from_traced(traced, grid.transform, where)
 
 
 #: Lines of one level in grid index space: (level, [(n, 2) points of each line]).
 LevelLines = tuple[float, list[NDArray[np.float64]]]
 
 
+def traced_levels(grid: DemGrid, interval: float, *, where: str) -> Iterator[LevelLines]:
+    """The lines of a grid level by level, each level traced when it is read (levels without a line left out).
+
+    Raises
+    ------
+    SourceError
+        The grid has no data (at once), or no level has a line (once every level is traced).
+    """
+    z = grid.z
+    if z.count() == 0:
+        raise SourceError(f"{where}: the DEM has no valid heights")
+    zmin, zmax = float(z.min()), float(z.max())
+    return _at_least_one(
+        iter_levels(z, contour_levels(zmin, zmax, interval)),
+        f"{where}: no contour at interval {interval:g} within the DEM's range [{zmin:g}, {zmax:g}]",
+    )
+
+
+def _at_least_one(levels: Iterator[LevelLines], message: str) -> Iterator[LevelLines]:
+    empty = True
+    for level in levels:
+        empty = False
+        yield level
+    if empty:
+        raise SourceError(message)
+
+
 def trace_levels(z: np.ma.MaskedArray, levels: NDArray[np.float64]) -> list[LevelLines]:
     """Lines of every level in grid index space (x = column, y = row of the pixel centre), levels without a
     line left out; a closed ring repeats its first vertex at the end, as contourpy returns it."""
+    return list(iter_levels(z, levels))
+
+
+def iter_levels(z: np.ma.MaskedArray, levels: NDArray[np.float64]) -> Iterator[LevelLines]:
+    """:func:`trace_levels`, each level traced when it is read."""
     generator = contourpy.contour_generator(
         z=z, name="serial", line_type=contourpy.LineType.ChunkCombinedOffset, chunk_size=0
     )
-    out: list[LevelLines] = []
     for level in levels.tolist():
         # ChunkCombinedOffset with one chunk: ([points (n, 2)] or [None], [offsets (m + 1,)] or [None]).
         lines: Any = generator.lines(level + LEVEL_OFFSET)
@@ -311,8 +315,7 @@ def trace_levels(z: np.ma.MaskedArray, levels: NDArray[np.float64]) -> list[Leve
             continue
         pts = np.asarray(points[0], dtype=np.float64)
         off = np.asarray(offsets[0], dtype=np.int64)
-        out.append((level, np.split(pts, off[1:-1])))
-    return out
+        yield level, np.split(pts, off[1:-1])
 
 
 def line_parts_from_traced(

@@ -9,8 +9,10 @@ has the vertices a whole-grid trace gives, no gap, no duplicate and no kink, so 
 whichever window size was used. Lines are joined, not split at window edges, because a split would pin a
 vertex of the line at every window edge at every scale.
 
-Only one window of heights is in memory at a time (plus the lines traced so far); the windows can be traced
-on a process pool or a Dask cluster (:mod:`engine.parallel`).
+Only one window of heights is in memory at a time; the windows can be traced on a process pool or a Dask
+cluster (:mod:`engine.parallel`). The traced pieces wait, level by level, in the reader's scratch file when
+one is given (:class:`~engine.io.scratch.ReadScratch`), and the levels are joined one at a time as they are
+read on, so the whole DEM's lines are never in memory at once.
 """
 
 from __future__ import annotations
@@ -28,8 +30,8 @@ from rasterio.windows import Window
 from scipy.spatial import cKDTree
 
 from engine.errors import InvalidParameter, SourceError
-from engine.io.dem import LevelLines, contour_levels, line_parts_from_traced, trace_levels
-from engine.io.vector import LineParts
+from engine.io.dem import LevelLines, contour_levels, trace_levels
+from engine.io.scratch import ReadScratch
 from engine.parallel import map_ordered
 
 #: Window side in cells when the caller gives none: 2049 × 2049 float64 heights are 34 MB.
@@ -161,14 +163,24 @@ def join_pieces(pieces: list[NDArray[np.float64]]) -> list[NDArray[np.float64]]:
 
 
 def contour_windows(
-    path: Path, interval: float, *, block: int = DEFAULT_BLOCK, executor: Executor | None = None
-) -> tuple[LineParts, str]:
-    """Trace a raster DEM window by window (see the module's docstring) and join the lines.
+    path: Path,
+    interval: float,
+    *,
+    block: int = DEFAULT_BLOCK,
+    executor: Executor | None = None,
+    scratch: ReadScratch | None = None,
+) -> tuple[Iterator[LevelLines], RasterHeader]:
+    """Trace a raster DEM window by window (see the module's docstring); its lines joined level by level.
+
+    Every window is traced before this returns (so an unusable DEM fails here); the levels are joined as the
+    returned iterator is read, in increasing order. With ``scratch``, the traced pieces wait there rather
+    than in memory.
 
     Returns
     -------
-    (parts, crs_wkt)
-        Lines in the grid's CRS as :func:`engine.io.dem.trace_contours` gives them, and the grid's CRS.
+    (levels, header)
+        Each level's lines in whole-grid index space as :func:`engine.io.dem.trace_levels` gives them, and
+        the grid's header (its geotransform and CRS).
 
     Raises
     ------
@@ -182,20 +194,46 @@ def contour_windows(
     header = read_header(path)
     if header.rows < 2 or header.cols < 2:
         raise SourceError(f"{path.name}: a DEM needs at least 2 x 2 cells, got {header.rows} x {header.cols}")
-    tasks = [(str(path), w, interval) for w in windows(header, block)]
-    by_level: dict[float, list[NDArray[np.float64]]] = {}
+    tasks = ((str(path), w, interval) for w in windows(header, block))
+    pieces = _LevelPieces(scratch)
     zmin, zmax = np.inf, -np.inf
     for traced, lo, hi in map_ordered(executor, trace_window, tasks):
         zmin, zmax = np.fmin(zmin, lo), np.fmax(zmax, hi)
         for level, lines in traced:
-            by_level.setdefault(level, []).extend(lines)
+            pieces.extend(level, lines)
     if not np.isfinite(zmin):
         raise SourceError(f"{path.name}: the DEM has no valid heights")
     contour_levels(float(zmin), float(zmax), interval)  # raises InvalidParameter beyond MAX_LEVELS levels
-    if not by_level:
+    if not pieces.levels:
         raise SourceError(
             f"{path.name}: no contour at interval {interval:g} within the DEM's range [{zmin:g}, {zmax:g}]"
         )
-    # Each level's pieces are let go as soon as they are joined: only one copy of the lines at a time.
-    joined = [(level, join_pieces(by_level.pop(level))) for level in sorted(by_level)]
-    return line_parts_from_traced(joined, header.transform, path.name), header.crs_wkt
+    return ((level, join_pieces(pieces.pop(level))) for level in sorted(pieces.levels)), header
+
+
+class _LevelPieces:
+    """Traced pieces by level, in window order: in a scratch file when given, else in memory. A level's
+    pieces are let go as soon as they are taken to be joined."""
+
+    def __init__(self, scratch: ReadScratch | None) -> None:
+        self.scratch = scratch
+        self.levels: set[float] = set()
+        self._held: dict[float, list[NDArray[np.float64]]] = {}
+
+    def extend(self, level: float, lines: list[NDArray[np.float64]]) -> None:
+        self.levels.add(level)
+        if self.scratch is not None:
+            self.scratch.extend(self._name(level), lines)
+        else:
+            self._held.setdefault(level, []).extend(lines)
+
+    def pop(self, level: float) -> list[NDArray[np.float64]]:
+        if self.scratch is None:
+            return self._held.pop(level)
+        lines = list(self.scratch.read(self._name(level)))
+        self.scratch.drop(self._name(level))
+        return lines
+
+    @staticmethod
+    def _name(level: float) -> str:
+        return f"pieces {level!r}"

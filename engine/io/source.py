@@ -15,6 +15,7 @@ from engine.errors import InvalidParameter, SourceError
 from engine.io.crs import choose_working_crs, make_transformer
 from engine.io.dem import DEM_SUFFIXES, contours_from_dem
 from engine.io.sample import sample_contours_path, sample_dem_path
+from engine.io.scratch import ReadScratch
 from engine.io.vector import VECTOR_SUFFIXES, read_contours, write_geojson
 from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
 from engine.types import ContourSet
@@ -44,6 +45,7 @@ def read_source(
     tolerances: Tolerances = DEFAULT_TOLERANCES,
     block: int | None = None,
     executor: Executor | None = None,
+    scratch: ReadScratch | None = None,
 ) -> ContourSet:
     """Read contours from a contour file or a DEM.
 
@@ -65,6 +67,10 @@ def read_source(
     block, executor
         DEMs only: the window side and where windows are traced (see
         :func:`engine.io.dem.contours_from_dem`).
+    scratch
+        Where what is read waits, in a scratch file rather than in memory (:mod:`engine.io.scratch`): a DEM
+        is then held one level at a time, and the set's ``contours`` are read from the file when asked (it
+        must stay open while they are used). None = everything in memory.
 
     Returns
     -------
@@ -88,7 +94,9 @@ def read_source(
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix in VECTOR_SUFFIXES:
-        contour_set = read_contours(path, elevation_field=elevation_field, layer=layer, tolerances=tolerances)
+        contour_set = read_contours(
+            path, elevation_field=elevation_field, layer=layer, tolerances=tolerances, scratch=scratch
+        )
         if interval is not None:
             contour_set.interval = float(interval)
         return contour_set
@@ -97,10 +105,11 @@ def read_source(
             raise SourceError(f"{path}: file not found")
         if interval is None:
             raise InvalidParameter(f"{path}: a DEM needs a contour interval (interval=...)")
-        return contours_from_dem(path, interval=interval, tolerances=tolerances, block=block, executor=executor)
+        return contours_from_dem(
+            path, interval=interval, tolerances=tolerances, block=block, executor=executor, scratch=scratch
+        )
     if not path.exists():
         raise SourceError(f"{path}: file not found")
     raise SourceError(
-        f"{path}: unknown format {path.suffix or '(no extension)'!r}; "
-        f"expected one of {', '.join(SUPPORTED_SUFFIXES)}"
+        f"{path}: unknown format {path.suffix or '(no extension)'!r}; expected one of {', '.join(SUPPORTED_SUFFIXES)}"
     )

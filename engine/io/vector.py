@@ -11,8 +11,8 @@ import math
 import os
 import uuid
 from collections import Counter
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -34,6 +34,7 @@ from engine.io.crs import (
     make_transformer,
     parse_crs,
 )
+from engine.io.scratch import ReadScratch, ScratchContours
 from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
 from engine.types import BadFeature, Contour, ContourSet, Coords, FeatureId
 
@@ -95,6 +96,7 @@ def read_contours(
     elevation_field: str | None = None,
     layer: str | None = None,
     tolerances: Tolerances = DEFAULT_TOLERANCES,
+    scratch: ReadScratch | None = None,
 ) -> ContourSet:
     """Read contour lines from a GeoJSON, GeoPackage or Shapefile.
 
@@ -109,6 +111,8 @@ def read_contours(
         Layer name of a multi-layer file (GeoPackage); the first layer by default.
     tolerances
         ``duplicate_m`` merges consecutive vertices and closes rings, ``zero_length_m`` rejects dots.
+    scratch
+        Where the contours wait once read (see :func:`assemble_batches`); None = in memory.
 
     Returns
     -------
@@ -158,7 +162,9 @@ def read_contours(
     elevations, elev_reasons = _parse_elevations(field_data[elev_index], field_names[elev_index])
 
     parts = _explode_lines(wkb, feature_ids, elevations, elev_reasons, where)
-    return assemble_contours(parts, source_crs=source_crs, where=where, name=path.stem, tolerances=tolerances)
+    return assemble_contours(
+        parts, source_crs=source_crs, where=where, name=path.stem, tolerances=tolerances, scratch=scratch
+    )
 
 
 def _find_elevation_field(field_names: Sequence[str], requested: str | None, path: Path) -> int:
@@ -321,6 +327,11 @@ def _explode_lines(
 #: millions of vertices).
 ASSEMBLE_BATCH_VERTICES = 1 << 20
 
+#: Lists of a reader's scratch file (:class:`~engine.io.scratch.ReadScratch`): checked batches waiting for
+#: the working CRS, and the usable contours.
+CHECKED_LIST = "checked"
+CONTOURS_LIST = "contours"
+
 
 @dataclass
 class _Checked:
@@ -340,6 +351,7 @@ def assemble_contours(
     name: str,
     tolerances: Tolerances = DEFAULT_TOLERANCES,
     interval: float | None = None,
+    scratch: ReadScratch | None = None,
 ) -> ContourSet:
     """Validate, project and clean line parts into a :class:`ContourSet` (shared by vector and DEM sources).
 
@@ -365,6 +377,8 @@ def assemble_contours(
         Distances in metres of the working CRS.
     interval
         Contour interval; inferred from the elevations when None.
+    scratch
+        Where the contours wait once made (see :func:`assemble_batches`); None = in memory.
 
     Returns
     -------
@@ -375,14 +389,54 @@ def assemble_contours(
     SourceError
         No part is usable.
     """
-    batches = [_sub_parts(parts, a, b) for a, b in _batch_ranges(parts.offsets, ASSEMBLE_BATCH_VERTICES)]
-    checks = [_check_in_source_crs(batch, source_crs) for batch in batches]
-    usable = [c.bounds for c in checks if c.bounds is not None]
+    return assemble_batches(
+        in_batches(parts),
+        source_crs=source_crs,
+        where=where,
+        name=name,
+        tolerances=tolerances,
+        interval=interval,
+        scratch=scratch,
+    )
+
+
+def assemble_batches(
+    batches: Iterable[LineParts],
+    *,
+    source_crs: pyproj.CRS,
+    where: str,
+    name: str,
+    tolerances: Tolerances = DEFAULT_TOLERANCES,
+    interval: float | None = None,
+    scratch: ReadScratch | None = None,
+) -> ContourSet:
+    """:func:`assemble_contours` of line parts that come in batches (each of about
+    :data:`ASSEMBLE_BATCH_VERTICES` vertices or fewer), so that a reader never holds the whole source.
+
+    Two passes: each batch is checked in the source CRS as it comes, the working CRS is chosen from the
+    extent of every usable part, then each batch is projected and cleaned. With ``scratch``, the checked
+    batches wait in the scratch file between the passes and the contours are kept there too (the set's
+    ``contours`` then read from it when asked, :class:`~engine.io.scratch.ScratchContours`); without, both
+    stay in memory. Either way the same contours in the same order. Each batch's own ``bad`` (features
+    rejected before it was made) is listed before the reasons found here.
+    """
+    bad: list[BadFeature] = []
+    checked: list[tuple[LineParts, _Checked]] = []
+    usable = []
+    for batch in batches:
+        check = _check_in_source_crs(batch, source_crs)
+        bad.extend(batch.bad)
+        batch = LineParts(batch.xy, batch.offsets, batch.ids, batch.elevations)  # its bad ones are listed
+        if scratch is not None:
+            scratch.extend(CHECKED_LIST, [(batch, check)])
+        else:
+            checked.append((batch, check))
+        if check.bounds is not None:
+            usable.append(check.bounds)
+    waiting: Iterable[tuple[LineParts, _Checked]] = scratch.read(CHECKED_LIST) if scratch is not None else checked
     if not usable:
-        listed = [
-            b for batch, c in zip(batches, checks, strict=True) for b in _bad_from_reasons(batch, c.reasons, where)
-        ]
-        _raise_nothing_usable(where, list(parts.bad) + listed)
+        listed = [b for batch, c in waiting for b in _bad_from_reasons(batch, c.reasons, where)]
+        _raise_nothing_usable(where, bad + listed)
     # The working CRS from the extent of the usable parts, then each batch projected with one call.
     extent = np.array(usable)
     bounds = (
@@ -394,23 +448,40 @@ def assemble_contours(
     source_text = crs_to_string(source_crs)
     working_crs = choose_working_crs(source_text, bounds)
     to_working = make_transformer(source_text, working_crs)
-    bad = list(parts.bad)
     contours: list[Contour] = []
-    for batch, check in zip(batches, checks, strict=True):
-        contours.extend(_clean_in_working_crs(batch, check, to_working, working_crs, tolerances))
+    elevations: set[float] = set()  # for the interval, when it is to be inferred
+    for batch, check in waiting:
+        cleaned = _clean_in_working_crs(batch, check, to_working, working_crs, tolerances)
+        elevations.update(c.elevation for c in cleaned)
+        if scratch is not None:
+            scratch.extend(CONTOURS_LIST, cleaned)
+        else:
+            contours.extend(cleaned)
         bad.extend(_bad_from_reasons(batch, check.reasons, where))
-    if not contours:
+    if scratch is not None:
+        scratch.drop(CHECKED_LIST)
+    kept: Sequence[Contour] = ScratchContours(scratch, CONTOURS_LIST) if scratch is not None else contours
+    if not kept:
         _raise_nothing_usable(where, bad)
     if interval is None:
-        interval = infer_interval(np.array([c.elevation for c in contours], dtype=np.float64))
+        interval = infer_interval(np.array(sorted(elevations), dtype=np.float64))
     return ContourSet(
-        contours=contours,
+        contours=kept,
         working_crs=working_crs,
         source_crs=source_text,
         bad_features=bad,
         name=name,
         interval=interval,
     )
+
+
+def in_batches(parts: LineParts) -> Iterator[LineParts]:
+    """``parts`` in batches of about :data:`ASSEMBLE_BATCH_VERTICES` vertices; the first carries ``parts.bad``."""
+    for k, (a, b) in enumerate(_batch_ranges(parts.offsets, ASSEMBLE_BATCH_VERTICES)):
+        batch = _sub_parts(parts, a, b)
+        yield replace(batch, bad=list(parts.bad)) if k == 0 else batch
+    if len(parts.ids) == 0 and parts.bad:
+        yield replace(parts, bad=list(parts.bad))
 
 
 def _batch_ranges(offsets: NDArray[np.int64], vertices: int) -> list[tuple[int, int]]:

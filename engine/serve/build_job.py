@@ -26,7 +26,14 @@ from engine.cartography.options import PARAMS_KEY, CartographyOptions
 from engine.errors import BuildCancelled, CCSMError
 from engine.io.source import read_source
 from engine.parallel import lower_priority
-from engine.serve.datasets import RELIEF_DEM_KEY, SourceSpec, build_and_save, build_dataset, build_lock
+from engine.serve.datasets import (
+    RELIEF_DEM_KEY,
+    SourceSpec,
+    build_and_save,
+    build_dataset,
+    build_lock,
+    read_scratch,
+)
 from engine.store.sqlite import CCSStore
 
 log = logging.getLogger("ccsm.build")
@@ -98,23 +105,25 @@ def run(job: BuildJob) -> int:
     progress = _progress_reporter(store, job.dataset)
     try:
         if job.kind == "upload":
-            contour_set = read_source(
-                Path(job.source_path),
-                elevation_field=job.params.get("elevation_field"),
-                interval=job.params.get("interval"),
-            )
-            build_and_save(
-                store,
-                job.dataset,
-                contour_set,
-                name=job.name,
-                source="upload",
-                digest=job.digest,
-                params=job.params,
-                workers=job.workers,
-                progress=progress,
-                only_if_building=True,
-            )
+            with read_scratch(store) as scratch:
+                contour_set = read_source(
+                    Path(job.source_path),
+                    elevation_field=job.params.get("elevation_field"),
+                    interval=job.params.get("interval"),
+                    scratch=scratch,
+                )
+                build_and_save(
+                    store,
+                    job.dataset,
+                    contour_set,
+                    name=job.name,
+                    source="upload",
+                    digest=job.digest,
+                    params=job.params,
+                    workers=job.workers,
+                    progress=progress,
+                    only_if_building=True,
+                )
         else:
             fields = dict(job.params)
             if PARAMS_KEY in fields:  # the options travel as plain values; the spec takes the dataclass

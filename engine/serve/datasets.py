@@ -12,7 +12,7 @@ import json
 import os
 import time
 import unicodedata
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from concurrent.futures import Executor
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
@@ -23,12 +23,13 @@ from engine.cartography.options import PARAMS_KEY, CartographyOptions, check_sch
 from engine.cartography.units import source_units
 from engine.ccsm.build import BuiltSet, SpooledSet, build_into
 from engine.io.dem import DEM_SUFFIXES
+from engine.io.scratch import ReadScratch
 from engine.io.source import read_source
 from engine.params import BuildParams
 from engine.serve.records import contour_rows, dataset_meta
 from engine.store.spool import DiskSpool
 from engine.store.sqlite import STORE_FORMAT, CCSStore, DatasetInfo, NewContour
-from engine.types import Contour, ContourSet
+from engine.types import ContourSet
 
 Progress = Callable[[int, int], None]
 
@@ -157,6 +158,17 @@ def build_lock(store_path: Path) -> Iterator[None]:
             fcntl.flock(fh, fcntl.LOCK_UN)
 
 
+@contextmanager
+def read_scratch(store: CCSStore) -> Iterator[ReadScratch]:
+    """A scratch file beside the store for a source being read and built, removed when the build ends (the
+    contours it holds are read from it through the build: docs/design.md section 6)."""
+    scratch = ReadScratch(Path(store.path).parent)
+    try:
+        yield scratch
+    finally:
+        scratch.close()
+
+
 def is_current(store: CCSStore, spec: SourceSpec) -> bool:
     """True when the store holds ``spec``'s dataset built from the same bytes and parameters."""
     stored = store.source_hash_of(spec.dataset)
@@ -210,7 +222,6 @@ def build_and_save(
             store,
             dataset,
             built,
-            contour_set.contours,
             name=name,
             source=source,
             digest=digest,
@@ -226,7 +237,6 @@ def save_built(
     store: CCSStore,
     dataset: str,
     built: BuiltSet | SpooledSet,
-    contours: Sequence[Contour],
     *,
     name: str,
     source: str,
@@ -235,29 +245,24 @@ def save_built(
     build_seconds: float = 0.0,
     only_if_building: bool = False,
 ) -> DatasetInfo:
-    """Write a built set (``contours``: the input contours it was built from) as one dataset version.
+    """Write a built set as one dataset version.
 
     Rows are made and written batch by batch (:data:`SAVE_BATCH` contours) inside the store's one write
     transaction, so the reprojected rows of only one batch are in memory at a time.
     """
-    meta = dataset_meta(
-        built, name=name, source=source, source_hash=digest, params=params, build_seconds=build_seconds
-    )
-    return store.save(dataset, meta, _rows_in_batches(built, contours), only_if_building=only_if_building)
+    meta = dataset_meta(built, name=name, source=source, source_hash=digest, params=params, build_seconds=build_seconds)
+    return store.save(dataset, meta, _rows_in_batches(built), only_if_building=only_if_building)
 
 
 #: Contours whose store rows are made at once while a built set is written.
 SAVE_BATCH = 512
 
 
-def _rows_in_batches(built: BuiltSet | SpooledSet, contours: Sequence[Contour]) -> Iterator[NewContour]:
+def _rows_in_batches(built: BuiltSet | SpooledSet) -> Iterator[NewContour]:
     """The store rows of ``built``, made :data:`SAVE_BATCH` surfaces at a time (a spooled set reads only that
-    batch of surfaces from its spool)."""
-    by_key = {(c.id, float(c.elevation), c.n_vertices): c for c in contours}
-    for batch in built.surfaces_in_batches(SAVE_BATCH):
-        keys = ((s.contour_id, float(s.elevation), int(s.n_input_vertices)) for s in batch)
-        inputs = [by_key[k] for k in keys if k in by_key]
-        yield from contour_rows(batch, built.working_crs, inputs)
+    batch of surfaces and of input contours)."""
+    for surfaces, inputs in built.surfaces_in_batches(SAVE_BATCH):
+        yield from contour_rows(surfaces, built.working_crs, inputs)
 
 
 def build_dataset(
@@ -290,22 +295,28 @@ def build_dataset(
         return store.dataset(spec.dataset), False
     BuildParams(source_scale=spec.source_scale, target_scale=spec.target_scale)  # bad scales fail before reading
     params = spec.stored_params()  # bad cartography options fail before reading too
-    contour_set = read_source(
-        spec.path, elevation_field=spec.elevation_field, interval=spec.interval, block=spec.block, executor=executor
-    )
-    check_schedule_fits(spec.cartography, contour_set.interval, spec.source_scale)  # before anything is stored
-    info = build_and_save(
-        store,
-        spec.dataset,
-        contour_set,
-        name=spec.name,
-        source=spec.path.name,
-        digest=digest,
-        params=params,
-        workers=workers,
-        progress=progress,
-        only_if_building=only_if_building,
-        executor=executor,
-    )
+    with read_scratch(store) as scratch:
+        contour_set = read_source(
+            spec.path,
+            elevation_field=spec.elevation_field,
+            interval=spec.interval,
+            block=spec.block,
+            executor=executor,
+            scratch=scratch,
+        )
+        check_schedule_fits(spec.cartography, contour_set.interval, spec.source_scale)  # before anything is stored
+        info = build_and_save(
+            store,
+            spec.dataset,
+            contour_set,
+            name=spec.name,
+            source=spec.path.name,
+            digest=digest,
+            params=params,
+            workers=workers,
+            progress=progress,
+            only_if_building=only_if_building,
+            executor=executor,
+        )
     assert info is not None  # no still_wanted callback: always written
     return info, True

@@ -1,9 +1,8 @@
 """A scratch file for the surfaces of a build in progress (a :class:`~engine.ccsm.spool.Spool` on disk).
 
 The build writes each surface here as it is made and reads back one block or batch at a time, so its memory
-does not grow with the dataset (docs/design.md section 6). The scratch file is not the store: no server
-reads it, it is written without a journal or fsync (a killed build only leaves it to be removed: its name
-starts with :data:`SPOOL_PREFIX`) and it is deleted when the build ends.
+does not grow with the dataset (docs/design.md section 6). It is a scratch file of :mod:`engine.scratch`:
+no journal, no fsync, deleted when the build ends, and removed by the next build if its own was killed.
 """
 
 from __future__ import annotations
@@ -11,32 +10,11 @@ from __future__ import annotations
 import os
 import pickle
 import sqlite3
-import tempfile
 from collections.abc import Iterable, Sequence
-from pathlib import Path
 
 from engine.ccsm.ccs import CCS
 from engine.errors import StoreError
-from engine.store.sqlite import host_name, pid_alive
-
-#: Name prefix of scratch files, followed by the host and the process id of the build that writes it, so
-#: one left by a killed build can be told apart and removed (:func:`remove_stale_spools`).
-SPOOL_PREFIX = ".ccsm-spool-"
-
-
-def _own_prefix() -> str:
-    return f"{SPOOL_PREFIX}{host_name()}-{os.getpid()}-"
-
-
-def remove_stale_spools(directory: str | os.PathLike[str]) -> list[Path]:
-    """Remove the scratch files of this host's builds that no longer run; the paths removed."""
-    removed = []
-    for path in Path(directory).glob(f"{SPOOL_PREFIX}{host_name()}-*.sqlite"):
-        pid = path.name[len(SPOOL_PREFIX) + len(host_name()) + 1 :].split("-", 1)[0]
-        if pid.isdigit() and not pid_alive(int(pid)):
-            path.unlink(missing_ok=True)
-            removed.append(path)
-    return removed
+from engine.scratch import open_scratch
 
 #: Surfaces read per SQL statement (SQLite's default limit on bound parameters is 32,766).
 READ_BATCH = 500
@@ -59,18 +37,8 @@ class DiskSpool:
     """
 
     def __init__(self, directory: str | os.PathLike[str]) -> None:
-        remove_stale_spools(directory)
-        try:
-            fd, name = tempfile.mkstemp(prefix=_own_prefix(), suffix=".sqlite", dir=directory)
-        except OSError as exc:
-            raise StoreError(f"cannot make the build's scratch file in {directory}: {exc.strerror}") from exc
-        os.close(fd)
-        self.path = Path(name)
-        self._con = sqlite3.connect(self.path)
-        # Scratch data: no journal, no fsync. A crash loses only this file, which nothing else reads.
-        self._con.executescript(
-            "PRAGMA journal_mode=OFF; PRAGMA synchronous=OFF; PRAGMA cache_size=-16000;"
-            "CREATE TABLE surfaces (i INTEGER PRIMARY KEY, blob BLOB NOT NULL);"
+        self.path, self._con = open_scratch(
+            directory, "CREATE TABLE surfaces (i INTEGER PRIMARY KEY, blob BLOB NOT NULL);"
         )
 
     def put(self, index: int, surface: CCS) -> None:  # noqa: D102
@@ -107,5 +75,3 @@ class DiskSpool:
     def close(self) -> None:  # noqa: D102
         self._con.close()
         self.path.unlink(missing_ok=True)
-
-

@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from engine.errors import BuildCancelled, StoreError, StoreUnwritable, UnknownLayer
+from engine.scratch import host_name, pid_alive
 from engine.types import Coords
 
 #: Bumped whenever the layout of the file changes; a store of another format is refused.
@@ -305,17 +306,6 @@ def unwritable_reason(exc: BaseException) -> str | None:
     return None
 
 
-def pid_alive(pid: int) -> bool:
-    """Whether a process of this id runs on this machine (one we may not signal counts as running)."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 class CCSStore:
     """One SQLite store file. Thread-safe: each thread gets its own connection.
 
@@ -517,9 +507,7 @@ class CCSStore:
                     progress(counts.n, counts.n)
             if progress:
                 progress(counts.n, counts.n)
-            counter = (
-                int(cur.execute("SELECT value FROM store_meta WHERE key='version_counter'").fetchone()[0]) + 1
-            )
+            counter = int(cur.execute("SELECT value FROM store_meta WHERE key='version_counter'").fetchone()[0]) + 1
             cur.execute("UPDATE store_meta SET value=? WHERE key='version_counter'", (str(counter),))
             cur.execute(
                 "INSERT INTO datasets VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
@@ -733,8 +721,3 @@ class CCSStore:
     def integrity_ok(self) -> bool:
         """SQLite's own integrity check of the file."""
         return self._con().execute("PRAGMA integrity_check").fetchone()[0] == "ok"
-
-
-def host_name() -> str:
-    """This machine's name, as builds record it."""
-    return os.uname().nodename if hasattr(os, "uname") else "localhost"

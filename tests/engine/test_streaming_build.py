@@ -21,9 +21,10 @@ from engine.ccsm.spool import MemorySpool
 from engine.errors import StoreError
 from engine.parallel import map_ordered
 from engine.params import BuildParams
+from engine.scratch import SCRATCH_PREFIX, host_name, remove_stale_scratch
 from engine.serve.datasets import SourceSpec, build_dataset
-from engine.store.spool import SPOOL_PREFIX, DiskSpool, remove_stale_spools
-from engine.store.sqlite import CCSStore, host_name
+from engine.store.spool import DiskSpool
+from engine.store.sqlite import CCSStore
 from tests.app.conftest import write_geojson
 from tests.engine.test_blocks import ring_clusters
 
@@ -129,7 +130,7 @@ def test_a_store_build_through_the_scratch_file_writes_the_rows_of_an_in_memory_
     monkeypatch.setattr(datasets, "DiskSpool", InMemory)
     build_dataset(store, SourceSpec(clusters_source, "m", "m"), workers=1)
     assert stored_rows(store, "m") == streamed
-    assert not list(tmp_path.glob(f"{SPOOL_PREFIX}*"))  # the scratch file went with its build
+    assert not list(tmp_path.glob(f"{SCRATCH_PREFIX}*"))  # the scratch file went with its build
 
 
 def test_a_failing_build_removes_its_scratch_file_and_keeps_the_stored_version(
@@ -141,34 +142,35 @@ def test_a_failing_build_removes_its_scratch_file_and_keeps_the_stored_version(
     seen = []
 
     def fail(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
-        seen.extend(tmp_path.glob(f"{SPOOL_PREFIX}*"))
+        seen.extend(tmp_path.glob(f"{SCRATCH_PREFIX}*"))
         raise MemoryError("killed while writing")
 
     monkeypatch.setattr(datasets, "contour_rows", fail)
     with pytest.raises(MemoryError):
         build_dataset(store, SourceSpec(clusters_source, "c", "c"), workers=1, force=True)
-    assert len(seen) == 1 and seen[0].parent == tmp_path  # the scratch file was beside the store
-    assert not list(tmp_path.glob(f"{SPOOL_PREFIX}*"))
+    # The reader's scratch file (the source's contours) and the build's (its surfaces), both beside the store.
+    assert len(seen) == 2 and all(p.parent == tmp_path for p in seen)
+    assert not list(tmp_path.glob(f"{SCRATCH_PREFIX}*"))
     assert stored_rows(CCSStore(tmp_path / "s.sqlite"), "c") == before
 
 
 def test_scratch_files_of_dead_builds_are_removed_and_those_of_live_ones_kept(tmp_path) -> None:
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
     dead_pid = int(dead.stdout)
-    stale = tmp_path / f"{SPOOL_PREFIX}{host_name()}-{dead_pid}-abcd.sqlite"
-    live = tmp_path / f"{SPOOL_PREFIX}{host_name()}-{os.getpid()}-efgh.sqlite"
-    other_host = tmp_path / f"{SPOOL_PREFIX}elsewhere-{dead_pid}-ijkl.sqlite"
+    stale = tmp_path / f"{SCRATCH_PREFIX}{host_name()}-{dead_pid}-abcd.sqlite"
+    live = tmp_path / f"{SCRATCH_PREFIX}{host_name()}-{os.getpid()}-efgh.sqlite"
+    other_host = tmp_path / f"{SCRATCH_PREFIX}elsewhere-{dead_pid}-ijkl.sqlite"
     for path in (stale, live, other_host):
         path.write_bytes(b"x")
     spool = DiskSpool(tmp_path)  # a new build sweeps first
     try:
         assert not stale.exists()
         assert live.exists() and other_host.exists()
-        assert spool.path.name.startswith(f"{SPOOL_PREFIX}{host_name()}-{os.getpid()}-")
+        assert spool.path.name.startswith(f"{SCRATCH_PREFIX}{host_name()}-{os.getpid()}-")
     finally:
         spool.close()
     assert not spool.path.exists()
-    assert remove_stale_spools(tmp_path) == []
+    assert remove_stale_scratch(tmp_path) == []
 
 
 def test_a_scratch_file_that_cannot_be_made_is_a_clear_store_error(tmp_path) -> None:
