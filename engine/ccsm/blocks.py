@@ -247,22 +247,13 @@ def _block(
 
 
 def block_contacts(
-    near: Sequence[CCS | bytes],
-    first: Sequence[int],
-    last: Sequence[int],
-    own: Sequence[int],
-    ladder: NDArray[np.float64],
-    steps: Sequence[int],
+    near: Sequence[CCS | bytes], own: Sequence[int], ladder: NDArray[np.float64], steps: Sequence[int]
 ) -> set[tuple[int, int]]:
     """Pairs (i, j), i < j, of local indices (into ``near``) whose slices meet at some checked step, each with
-    an ``own`` surface in it; each near surface is cut to its rows ``first[i]`` .. ``last[i]`` (-1: whole).
-    The surfaces come as the spool keeps them (:func:`~engine.ccsm.spool.surface_of`): they are opened and
-    cut here, in the worker."""
-    surfaces = []
-    for payload, f, la in zip(near, first, last, strict=True):
-        s = surface_of(payload)
-        surfaces.append(s if f < 0 else replace(s, base=s.base[f : la + 1], top=s.top[f : la + 1]))
-    return new_contact_pairs(surfaces, ladder, steps, set(own))
+    an ``own`` surface in it. The surfaces come as :func:`_block_tasks` sends them: the block's own as the
+    spool keeps them (opened here, in the worker, :func:`~engine.ccsm.spool.surface_of`), the others cut to
+    their near stretches."""
+    return new_contact_pairs([surface_of(p) for p in near], ladder, steps, set(own))
 
 
 def input_touches(spool: Spool) -> InputTouches:
@@ -283,10 +274,20 @@ class _SpoolBases:
 def _block_tasks(
     blocks: Sequence[Block], spool: Spool, ladder: NDArray[np.float64], steps: list[int]
 ) -> Iterator[tuple[Any, ...]]:
-    """One task per block, each block's surfaces read from the spool only when its task is sent."""
+    """One task per block, each block's surfaces read from the spool only when its task is sent: its own
+    surfaces as the spool keeps them, every other one cut to its near stretch here, so that a long contour
+    passing by is not shipped whole to every block it passes (a task's size follows the block's rows)."""
     for b in blocks:
-        near = spool.get_payloads(b.near.tolist())
-        yield near, b.first.tolist(), b.last.tolist(), np.searchsorted(b.near, b.own).tolist(), ladder, steps
+        near = [
+            payload if f < 0 else _stretch(surface_of(payload), f, la)
+            for payload, f, la in zip(spool.get_payloads(b.near.tolist()), b.first, b.last, strict=True)
+        ]
+        yield near, np.searchsorted(b.near, b.own).tolist(), ladder, steps
+
+
+def _stretch(surface: CCS, first: int, last: int) -> CCS:
+    """Rows ``first`` .. ``last`` of a surface (its slices there), as the blocks' check takes them."""
+    return replace(surface, base=surface.base[first : last + 1].copy(), top=surface.top[first : last + 1].copy())
 
 
 def find_crossings_by_block(
