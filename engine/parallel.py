@@ -18,6 +18,7 @@ from typing import Any, ParamSpec, TypeVar
 from threadpoolctl import threadpool_limits
 
 from engine.errors import InvalidParameter
+from engine.heap import keep_big_buffers_out_of_the_heap
 
 P = ParamSpec("P")
 R = TypeVar("R")
@@ -29,6 +30,7 @@ CONNECT_TIMEOUT_S = 20
 def run_single_threaded(fn: Callable[..., R], *args: Any, **kwargs: Any) -> R:
     """Call ``fn`` with one BLAS thread: a worker's small banded solves only spin on more, and fight the
     other workers for the cores."""
+    keep_big_buffers_out_of_the_heap()  # once per process
     with threadpool_limits(1):
         return fn(*args, **kwargs)
 
@@ -46,13 +48,14 @@ class SingleThreadedExecutor(Executor):
         self.inner.shutdown(wait=wait, cancel_futures=cancel_futures)
 
 
-def _one_blas_thread() -> None:
+def _set_up_worker() -> None:
     threadpool_limits(1)
+    keep_big_buffers_out_of_the_heap()
 
 
 def local_pool(workers: int) -> Executor:
     """A process pool of ``workers`` processes, each with one BLAS thread."""
-    return ProcessPoolExecutor(max_workers=workers, initializer=_one_blas_thread)
+    return ProcessPoolExecutor(max_workers=workers, initializer=_set_up_worker)
 
 
 @contextmanager
@@ -82,25 +85,38 @@ AHEAD = 8
 
 
 def map_ordered(
-    executor: Executor | None, fn: Callable[..., R], tasks: Iterable[tuple[Any, ...]], ahead: int = AHEAD
+    executor: Executor | None,
+    fn: Callable[..., R],
+    tasks: Iterable[tuple[Any, ...]],
+    ahead: int = AHEAD,
+    *,
+    weight: Callable[[tuple[Any, ...]], int] | None = None,
+    budget: int | None = None,
 ) -> Iterator[R]:
     """``fn(*task)`` for every task, yielded in the tasks' order; in this process when ``executor`` is None.
 
     ``tasks`` is read lazily and at most ``ahead`` tasks are submitted and not yet yielded, so a generator of
-    tasks that loads each task's data (a block's surfaces from a spool) holds only that many at once.
+    tasks that loads each task's data (a block's surfaces from a spool) holds only that many at once. With
+    ``weight`` (a task's size in bytes, say) and ``budget``, no new task is read while those in flight weigh
+    ``budget`` or more: a few heavy tasks then fill the look-ahead as many light ones do.
     """
     if executor is None:
         with threadpool_limits(1):
             for task in tasks:
                 yield fn(*task)
         return
-    pending: deque[Future[R]] = deque()
+    pending: deque[tuple[Future[R], int]] = deque()
+    in_flight = 0
     for task in tasks:
-        pending.append(executor.submit(fn, *task))
-        if len(pending) >= ahead:
-            yield pending.popleft().result()
+        w = weight(task) if weight is not None else 0
+        pending.append((executor.submit(fn, *task), w))
+        in_flight += w
+        while pending and (len(pending) >= ahead or (budget is not None and in_flight >= budget)):
+            future, done = pending.popleft()
+            in_flight -= done
+            yield future.result()
     while pending:
-        yield pending.popleft().result()
+        yield pending.popleft()[0].result()
 
 
 def lower_priority(niceness: int, *, idle: bool = False) -> None:

@@ -78,7 +78,7 @@ class ContourSubset(Sequence[Contour]):
 
     def __init__(self, contours: Sequence[Contour], positions: Sequence[int]) -> None:
         self.contours = contours
-        self.positions = [int(p) for p in positions]
+        self.positions = np.asarray(positions, dtype=np.int64)  # 8 bytes a contour, not a Python int's 36
 
     def __len__(self) -> int:
         return len(self.positions)
@@ -92,12 +92,12 @@ class ContourSubset(Sequence[Contour]):
     def __getitem__(self, index: int | slice) -> Contour | list[Contour]:
         if isinstance(index, slice):
             wanted = self.positions[index]
-            if not wanted:
+            if not len(wanted):
                 return []
-            lo, hi = min(wanted), max(wanted)
+            lo, hi = int(wanted.min()), int(wanted.max())
             span = self.contours[lo : hi + 1]
-            return [span[p - lo] for p in wanted]
-        return self.contours[self.positions[index]]
+            return [span[p - lo] for p in wanted.tolist()]
+        return self.contours[int(self.positions[index])]
 
     def __iter__(self) -> Iterator[Contour]:
         for start in range(0, len(self), self.BATCH):

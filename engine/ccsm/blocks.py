@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 from engine.ccsm.spool import Spool, surface_of
 from engine.ccsm.topology import InputTouches, concatenated_ranges, new_contact_pairs, per_piece, piece_ranges
+from engine.heap import release_free_memory
 from engine.parallel import map_ordered
 from engine.types import Coords
 
@@ -52,6 +53,9 @@ class PieceIndex:
     """The swept boxes of every surface's pieces, by surface number; a rebuilt surface's pieces replace its old
     ones (:meth:`put`).
 
+    The pieces are kept in a few flat arrays, not an array per surface: a big set has hundreds of thousands of
+    surfaces, and per-surface arrays cost more in their overhead than in their numbers.
+
     >>> from engine.ccsm.ccs import CCS
     >>> line = np.column_stack([np.arange(40.0), np.zeros(40)])
     >>> index = PieceIndex()
@@ -61,14 +65,18 @@ class PieceIndex:
     """
 
     def __init__(self) -> None:
-        self._boxes: dict[int, NDArray[np.float64]] = {}
-        self._first: dict[int, NDArray[np.intp]] = {}
-        self._last: dict[int, NDArray[np.intp]] = {}
+        self._boxes = np.zeros((0, 4))
+        self._first = np.zeros(0, dtype=np.intp)
+        self._last = np.zeros(0, dtype=np.intp)
+        self._owner = np.zeros(0, dtype=np.intp)  # -1: a replaced piece, dropped at the next compaction
+        self._size = 0
+        self._sorted = True  # pieces in owner order, none replaced
 
     def put(self, numbers: Sequence[int], surfaces: Sequence[CCS]) -> None:
         """Index ``surfaces`` as numbers ``numbers`` (one vectorised pass for them all)."""
         if not len(surfaces):
             return
+        numbers_arr = np.asarray(numbers, dtype=np.intp)
         sizes = np.array([len(s.base) for s in surfaces], dtype=np.intp)
         first, last, owner = piece_ranges(sizes, INDEX_PIECE_SEGMENTS)
         base = np.concatenate([s.base for s in surfaces])
@@ -76,34 +84,49 @@ class PieceIndex:
         lo = per_piece(np.minimum, np.minimum(base, top), first, last)
         hi = per_piece(np.maximum, np.maximum(base, top), first, last)
         offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-        cuts = np.searchsorted(owner, np.arange(1, len(surfaces)))
-        parts = zip(np.split(np.hstack([lo, hi]), cuts), np.split(first, cuts), np.split(last, cuts), strict=True)
-        for k, (boxes, f, la) in enumerate(parts):
-            number = int(numbers[k])
-            self._boxes[number] = boxes
-            self._first[number] = (f - offsets[k]).astype(np.intp)
-            self._last[number] = (la - offsets[k]).astype(np.intp)
+        live = self._owner[: self._size]
+        replaced = np.isin(live, numbers_arr)
+        if replaced.any():
+            live[replaced] = -1
+            self._sorted = False
+        if self._size and numbers_arr.min() <= live.max(initial=-1):
+            self._sorted = False
+        self._append(np.hstack([lo, hi]), first - offsets[owner], last - offsets[owner], numbers_arr[owner])
+
+    def _append(
+        self, boxes: NDArray[np.float64], first: NDArray[np.intp], last: NDArray[np.intp], owner: NDArray[np.intp]
+    ) -> None:
+        need = self._size + len(owner)
+        if need > len(self._owner):  # grow by half again: appends stay amortised O(1)
+            cap = max(need, len(self._owner) * 3 // 2, 1024)
+            self._boxes = np.resize(self._boxes, (cap, 4))
+            self._first, self._last = np.resize(self._first, cap), np.resize(self._last, cap)
+            self._owner = np.resize(self._owner, cap)
+        at = slice(self._size, need)
+        self._boxes[at], self._first[at], self._last[at], self._owner[at] = boxes, first, last, owner
+        self._size = need
+
+    def _compact(self) -> None:
+        """Drop replaced pieces and put the rest in owner order (rebuilt surfaces' pieces come last)."""
+        owner = self._owner[: self._size]
+        keep = np.flatnonzero(owner >= 0)
+        keep = keep[np.argsort(owner[keep], kind="stable")]
+        self._boxes = self._boxes[keep]
+        self._first, self._last, self._owner = self._first[keep], self._last[keep], self._owner[keep]
+        self._size = len(keep)
+        self._sorted = True
 
     def arrays(
         self,
     ) -> tuple[NDArray[np.float64], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]:
         """(boxes (P, 4), first row, last row, owner, start) of every piece, sorted by owner; ``start[i]`` is
         the first piece of surface i (``start`` has one more entry, the number of pieces)."""
-        numbers = sorted(self._boxes)
-        counts = np.array([len(self._first[i]) for i in numbers], dtype=np.intp)
-        start = np.zeros((numbers[-1] + 2) if numbers else 1, dtype=np.intp)
-        start[np.array(numbers, dtype=np.intp) + 1] = counts
-        start = np.cumsum(start)
-        if not numbers:
-            empty = np.zeros(0, dtype=np.intp)
-            return np.zeros((0, 4)), empty, empty, empty, start
-        return (
-            np.concatenate([self._boxes[i] for i in numbers]),
-            np.concatenate([self._first[i] for i in numbers]),
-            np.concatenate([self._last[i] for i in numbers]),
-            np.repeat(np.array(numbers, dtype=np.intp), counts),
-            start,
-        )
+        if not self._sorted:
+            self._compact()
+        n = self._size
+        owner = self._owner[:n]
+        counts = np.bincount(owner + 1, minlength=int(owner[-1]) + 2) if n else np.zeros(1, dtype=np.intp)
+        return self._boxes[:n], self._first[:n], self._last[:n], owner, np.cumsum(counts).astype(np.intp)
 
 
 @dataclass(frozen=True)
@@ -253,7 +276,9 @@ def block_contacts(
     an ``own`` surface in it. The surfaces come as :func:`_block_tasks` sends them: the block's own as the
     spool keeps them (opened here, in the worker, :func:`~engine.ccsm.spool.surface_of`), the others cut to
     their near stretches."""
-    return new_contact_pairs([surface_of(p) for p in near], ladder, steps, set(own))
+    pairs = new_contact_pairs([surface_of(p) for p in near], ladder, steps, set(own))
+    release_free_memory()  # a worker's next block starts from what this one freed
+    return pairs
 
 
 def input_touches(spool: Spool) -> InputTouches:
@@ -283,6 +308,16 @@ def _block_tasks(
             for payload, f, la in zip(spool.get_payloads(b.near.tolist()), b.first, b.last, strict=True)
         ]
         yield near, np.searchsorted(b.near, b.own).tolist(), ladder, steps
+
+
+#: Bytes of block tasks in flight (sent and not yet answered) before the next block is read: with the
+#: look-ahead's count alone, a run of blocks of long contours held hundreds of MB in the build process.
+BLOCK_TASK_BUDGET_BYTES = 48 << 20
+
+
+def _task_bytes(task: tuple[Any, ...]) -> int:
+    """About the bytes of a block task's surfaces: their payloads as the spool keeps them, or their rows."""
+    return sum(len(p) if isinstance(p, bytes) else p.base.nbytes + p.top.nbytes for p in task[0])
 
 
 def _stretch(surface: CCS, first: int, last: int) -> CCS:
@@ -333,9 +368,11 @@ def find_crossings_by_block(
     touches = touches if touches is not None else input_touches(spool)
     found: set[int] = set()
     tasks = _block_tasks(blocks, spool, ladder, list(steps))
-    for block, pairs in zip(blocks, map_ordered(executor, block_contacts, tasks), strict=True):
+    checks = map_ordered(executor, block_contacts, tasks, weight=_task_bytes, budget=BLOCK_TASK_BUDGET_BYTES)
+    for block, pairs in zip(blocks, checks, strict=True):
         for a, b in pairs:
             pair = (int(block.near[a]), int(block.near[b]))
             if pair not in touches:
                 found.update(pair)
+    release_free_memory()
     return found

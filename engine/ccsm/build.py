@@ -22,6 +22,7 @@ from engine.ccsm.regression import ScaleModel, fit_scale_model
 from engine.ccsm.spool import MemorySpool, Spool, in_batches
 from engine.errors import CCSMError
 from engine.geom.polyline import ring_areas
+from engine.heap import keep_big_buffers_out_of_the_heap, release_free_memory
 from engine.parallel import local_pool, map_ordered
 from engine.params import BuildParams
 from engine.tolerances import MIN_VISIBLE_RING_SIDE_M
@@ -225,6 +226,8 @@ def build_into(
         None = a local pool of ``workers`` processes, or this process.
     """
     params = params or BuildParams()
+    keep_big_buffers_out_of_the_heap()
+    release_free_memory()  # what reading the source freed
     usable, rejected = _usable(contour_set.contours)
     # The usable contours are read from the set when a chunk needs them: a big source's wait on disk.
     contours = ContourSubset(contour_set.contours, usable)
@@ -233,7 +236,7 @@ def build_into(
     starts = range(0, len(contours), CHUNK)
     tasks = ((contours[i : i + CHUNK], labels[i : i + CHUNK].tolist(), params, model) for i in starts)
     built: list[int] = []  # index into ``contours`` of each surface, by its number in the spool
-    boxes: list[tuple[float, float, float, float]] = []
+    boxes: list[NDArray[np.float64]] = []  # (k, 4) boxes of each chunk's surfaces
     pieces = PieceIndex()  # the surfaces' pieces, for the repair's blocks
     failed: list[BadFeature] = []
     total = len(contours)  # contours that passed the check; the rejected ones are reported, not built
@@ -250,15 +253,16 @@ def build_into(
             spool.put_many(numbered)
             pieces.put([k for k, _ in numbered], [s for _, s in numbered])
             built.extend(i for i, _ in surfaces)
-            boxes.extend(s.bounds for _, s in surfaces)
+            boxes.append(np.array([s.bounds for _, s in surfaces], dtype=np.float64).reshape(-1, 4))
             if progress:
                 progress(min(start + CHUNK, total), total)
         inputs = ContourSubset(contours, built)  # the input of each surface, by its number
         repaired = 0
         if params.resolve_crossings and params.target_mode == "scale" and built:
             with threadpool_limits(1):
+                release_free_memory()
                 repaired = resolve_crossings(
-                    spool, np.array(boxes), pieces, inputs, labels[built].tolist(), params, model, pool
+                    spool, np.concatenate(boxes), pieces, inputs, labels[built].tolist(), params, model, pool
                 )
     return SpooledSet(
         spool=spool,
@@ -375,9 +379,10 @@ def _rebuild(
     params: BuildParams,
     model: ScaleModel,
     executor: Executor | None,
-) -> list[CCS | BadFeature]:
-    """Rebuild contours ``todo`` = (index, tolerance factor), in chunks on ``executor``; results in order."""
-    tasks = [
+) -> Iterator[CCS | BadFeature]:
+    """Rebuild contours ``todo`` = (index, tolerance factor), in chunks on ``executor``; results in order, as
+    they come (a round can rebuild thousands: neither their inputs nor their surfaces are held at once)."""
+    tasks = (
         (
             [inputs[i] for i, _ in todo[k : k + REPAIR_CHUNK]],
             [labels[i] for i, _ in todo[k : k + REPAIR_CHUNK]],
@@ -386,8 +391,8 @@ def _rebuild(
             [f for _, f in todo[k : k + REPAIR_CHUNK]],
         )
         for k in range(0, len(todo), REPAIR_CHUNK)
-    ]
-    return [r for chunk in map_ordered(executor, _build_chunk, tasks) for r in chunk]
+    )
+    return (r for chunk in map_ordered(executor, _build_chunk, tasks) for r in chunk)
 
 
 def _next_factor(factor: float) -> float:

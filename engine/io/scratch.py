@@ -59,10 +59,10 @@ class ReadScratch:
         )
         return [pickle.loads(blob) for (blob,) in rows]
 
-    def read(self, name: str) -> Iterator[Any]:
-        """Every object of list ``name`` in order, :data:`READ_BATCH` read at a time."""
-        for start in range(0, self.count(name), READ_BATCH):
-            yield from self.read_range(name, start, start + READ_BATCH)
+    def read(self, name: str, batch: int = READ_BATCH) -> Iterator[Any]:
+        """Every object of list ``name`` in order, ``batch`` read at a time (1 for big objects)."""
+        for start in range(0, self.count(name), batch):
+            yield from self.read_range(name, start, start + batch)
 
     def drop(self, name: str) -> None:
         """Forget list ``name`` (its space is reused by later lists)."""
