@@ -71,6 +71,9 @@ class PieceIndex:
         self._owner = np.zeros(0, dtype=np.intp)  # -1: a replaced piece, dropped at the next compaction
         self._size = 0
         self._sorted = True  # pieces in owner order, none replaced
+        # Each surface's pieces: positions [_at[i], _at[i] + _count[i]) of the arrays (_at[i] = -1: none).
+        self._at = np.zeros(0, dtype=np.intp)
+        self._count = np.zeros(0, dtype=np.intp)
 
     def put(self, numbers: Sequence[int], surfaces: Sequence[CCS]) -> None:
         """Index ``surfaces`` as numbers ``numbers`` (one vectorised pass for them all)."""
@@ -84,14 +87,25 @@ class PieceIndex:
         lo = per_piece(np.minimum, np.minimum(base, top), first, last)
         hi = per_piece(np.maximum, np.maximum(base, top), first, last)
         offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-        live = self._owner[: self._size]
-        replaced = np.isin(live, numbers_arr)
-        if replaced.any():
-            live[replaced] = -1
-            self._sorted = False
-        if self._size and numbers_arr.min() <= live.max(initial=-1):
-            self._sorted = False
+        self._forget(numbers_arr)
+        counts = np.bincount(owner, minlength=len(surfaces))
+        self._at[numbers_arr] = self._size + np.concatenate([[0], np.cumsum(counts)[:-1]])
+        self._count[numbers_arr] = counts
         self._append(np.hstack([lo, hi]), first - offsets[owner], last - offsets[owner], numbers_arr[owner])
+
+    def _forget(self, numbers: NDArray[np.intp]) -> None:
+        """Mark the pieces of surfaces ``numbers`` replaced (making room for their numbers first)."""
+        top = int(numbers.max()) + 1
+        if top > len(self._at):
+            grown = max(top, len(self._at) * 3 // 2)
+            self._at = np.concatenate([self._at, np.full(grown - len(self._at), -1, dtype=np.intp)])
+            self._count = np.concatenate([self._count, np.zeros(grown - len(self._count), dtype=np.intp)])
+        held = numbers[self._at[numbers] >= 0]
+        if len(held):
+            self._owner[concatenated_ranges(self._at[held], self._count[held])] = -1
+            self._sorted = False
+        elif self._size and int(numbers.min()) <= int(self._owner[self._size - 1]):
+            self._sorted = False  # new numbers, but not after the last ones
 
     def _append(
         self, boxes: NDArray[np.float64], first: NDArray[np.intp], last: NDArray[np.intp], owner: NDArray[np.intp]
@@ -115,6 +129,9 @@ class PieceIndex:
         self._first, self._last, self._owner = self._first[keep], self._last[keep], self._owner[keep]
         self._size = len(keep)
         self._sorted = True
+        counts = np.bincount(self._owner, minlength=len(self._at))
+        self._at = np.where(counts > 0, np.cumsum(counts) - counts, -1).astype(np.intp)
+        self._count = counts.astype(np.intp)
 
     def arrays(
         self,

@@ -433,7 +433,10 @@ def assemble_batches(
             checked.append((batch, check))
         if check.bounds is not None:
             usable.append(check.bounds)
-    waiting: Iterable[tuple[LineParts, _Checked]] = scratch.read(CHECKED_LIST, batch=1) if scratch is not None else checked
+    # Read back one batch at a time: a batch is up to ASSEMBLE_BATCH_VERTICES vertices.
+    waiting: Iterable[tuple[LineParts, _Checked]] = (
+        scratch.read(CHECKED_LIST, batch=1) if scratch is not None else checked
+    )
     if not usable:
         listed = [b for batch, c in waiting for b in _bad_from_reasons(batch, c.reasons, where)]
         _raise_nothing_usable(where, bad + listed)
