@@ -178,7 +178,7 @@ def build_ccs(contour: Contour, params: BuildParams, tolerance_factor: float = 1
     l0 = path[:-1] if contour.closed else path
     sim_t = np.linspace(0.0, 1.0, params.similarity_levels)
     reference = SimilarityReference.of(l0, contour.closed, params.similarity_spacing_m)
-    sims = np.array([reference.similarity(_as_ring(slice_rows(base, top, t), contour.closed)) for t in sim_t])
+    sims = reference.slice_similarities(base, top, sim_t)
     return CCS(
         contour_id=contour.id,
         elevation=contour.elevation,
@@ -197,8 +197,3 @@ def build_ccs(contour: Contour, params: BuildParams, tolerance_factor: float = 1
 def slice_area(ccs: CCS, t: float) -> float:
     """Area of a ring's slice at ``t`` (0 for an open line)."""
     return ring_area(ccs.at(t)[:-1]) if ccs.closed else 0.0
-
-
-def _as_ring(path: Coords, closed: bool) -> Coords:
-    """A closed path without its repeated last point (the form ``similarity`` takes for rings)."""
-    return path[:-1] if closed else path
