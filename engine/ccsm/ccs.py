@@ -11,10 +11,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from engine.ccsm.resample import correspond
+from engine.ccsm.resample import Correspondence, correspond
 from engine.ccsm.similarity import SimilarityReference
 from engine.ccsm.slicing import ccs_mesh, check_t, slice_rows
-from engine.ccsm.surface import CCSurface, fit_surface, tessellation_parameters
+from engine.ccsm.surface import CCSurface, fit_surface, surface_rows
 from engine.errors import InvalidContour
 from engine.geom.douglas_peucker import douglas_peucker, douglas_peucker_count
 from engine.geom.polyline import closed_path, path_length, ring_area
@@ -137,6 +137,15 @@ def check_contour(contour: Contour) -> None:
 
 def build_surface(contour: Contour, params: BuildParams, tolerance_factor: float = 1.0) -> SurfaceParts:
     """Steps 1-5 of CCSM for one contour: target, correspondence, surface."""
+    path, keep, corr = _correspondence(contour, params, tolerance_factor)
+    surface = fit_surface(corr.initial, corr.target, contour.closed)
+    return SurfaceParts(path=path, characteristic=keep, initial=corr.initial, target=corr.target, surface=surface)
+
+
+def _correspondence(
+    contour: Contour, params: BuildParams, tolerance_factor: float
+) -> tuple[Coords, NDArray[np.intp], Correspondence]:
+    """Steps 1-2 of CCSM: L0 as a path, the characteristic points (indices into it) and the samples."""
     check_contour(contour)
     xy = contour.coords
     keep = target_indices(xy, contour.closed, params, tolerance_factor)
@@ -148,11 +157,7 @@ def build_surface(contour: Contour, params: BuildParams, tolerance_factor: float
     else:
         path = xy
     spacing = min(params.spacing_m, path_length(path) / MIN_SAMPLES)
-    corr = correspond(path, keep, spacing)
-    surface = fit_surface(corr.initial, corr.target, contour.closed)
-    return SurfaceParts(
-        path=path, characteristic=keep, initial=corr.initial, target=corr.target, surface=surface
-    )
+    return path, keep, correspond(path, keep, spacing)
 
 
 def build_ccs(contour: Contour, params: BuildParams, tolerance_factor: float = 1.0) -> CCS:
@@ -165,17 +170,15 @@ def build_ccs(contour: Contour, params: BuildParams, tolerance_factor: float = 1
     SurfaceFitError
         The surface could not be fitted.
     """
-    parts = build_surface(contour, params, tolerance_factor)
-    u = tessellation_parameters(parts.surface.params, params.tessellation_per_span)
-    base = parts.surface.base(u)
-    top = parts.surface.top(u)
+    path, keep, corr = _correspondence(contour, params, tolerance_factor)
+    base, top = surface_rows(corr.initial, corr.target, contour.closed, params.tessellation_per_span)
     if contour.closed:
         base[-1] = base[0]
         top[-1] = top[0]
-    l0 = parts.path[:-1] if contour.closed else parts.path
+    l0 = path[:-1] if contour.closed else path
     sim_t = np.linspace(0.0, 1.0, params.similarity_levels)
     reference = SimilarityReference.of(l0, contour.closed, params.similarity_spacing_m)
-    sims = np.array([reference.similarity(_as_ring(slice_rows(base, top, t), contour.closed)) for t in sim_t])
+    sims = reference.slice_similarities(base, top, sim_t)
     return CCS(
         contour_id=contour.id,
         elevation=contour.elevation,
@@ -186,14 +189,9 @@ def build_ccs(contour: Contour, params: BuildParams, tolerance_factor: float = 1
         sim=sims,
         length_m=path_length(contour.coords, contour.closed),
         n_input_vertices=contour.n_vertices,
-        target_vertices=len(parts.characteristic) - (1 if contour.closed else 0),
+        target_vertices=len(keep) - (1 if contour.closed else 0),
         tolerance_factor=tolerance_factor,
     )
-
-
-def _as_ring(path: Coords, closed: bool) -> Coords:
-    """A closed path without its repeated last point (the form ``similarity`` takes for rings)."""
-    return path[:-1] if closed else path
 
 
 def slice_area(ccs: CCS, t: float) -> float:

@@ -143,6 +143,22 @@ class CCSurface:
         return surf
 
 
+def fit_parameters(initial: Coords, target: Coords) -> NDArray[np.float64]:
+    """The (N,) averaged u parameters of the wireframe through ``initial`` and ``target``, checked for a fit.
+
+    Raises
+    ------
+    SurfaceFitError
+        Too few samples, rows of different shapes, or repeated samples (equal parameters).
+    """
+    if len(initial) < DEGREE + 1 or initial.shape != target.shape:
+        raise SurfaceFitError(f"need at least {DEGREE + 1} corresponding samples, got {len(initial)}")
+    params = averaged_parameters(wireframe(initial, target))
+    if np.any(np.diff(params) <= 0):
+        raise SurfaceFitError("repeated samples give equal surface parameters")
+    return params
+
+
 def fit_surface(initial: Coords, target: Coords, closed: bool) -> CCSurface:
     """Fit the CCS through corresponding samples of ``L0`` and ``Ln``.
 
@@ -162,11 +178,7 @@ def fit_surface(initial: Coords, target: Coords, closed: bool) -> CCSurface:
     SurfaceFitError
         Too few samples, or a singular collocation system.
     """
-    if len(initial) < DEGREE + 1 or initial.shape != target.shape:
-        raise SurfaceFitError(f"need at least {DEGREE + 1} corresponding samples, got {len(initial)}")
-    params = averaged_parameters(wireframe(initial, target))
-    if np.any(np.diff(params) <= 0):
-        raise SurfaceFitError("repeated samples give equal surface parameters")
+    params = fit_parameters(initial, target)
     data = np.concatenate([initial, target], axis=1)  # (N, 4): both boundary rows in one solve
     try:
         if closed:
@@ -187,3 +199,32 @@ def tessellation_parameters(params: NDArray[np.float64], per_span: int) -> NDArr
     steps = np.arange(per_span + 1) / (per_span + 1)
     inner = params[:-1, None] + np.diff(params)[:, None] * steps[None, :]
     return np.concatenate([inner.ravel(), params[-1:]])
+
+
+def surface_rows(initial: Coords, target: Coords, closed: bool, per_span: int) -> tuple[Coords, Coords]:
+    """The tessellated rows ``base`` (height 0) and ``top`` (height 1) of the CCS through these samples.
+
+    With ``per_span`` = 0 the rows are the curves at their own data parameters, and an interpolating curve
+    passes through its data there: the rows are the samples themselves, so they are taken as they are and no
+    spline is solved (the fit's checks still run). Only extra samples between data parameters need the fit.
+
+    Parameters
+    ----------
+    initial, target
+        (N, 2) corresponding samples, as for :func:`fit_surface`.
+    closed
+        A ring (periodic curves).
+    per_span
+        ``BuildParams.tessellation_per_span``.
+
+    Raises
+    ------
+    SurfaceFitError
+        As :func:`fit_surface`.
+    """
+    if per_span <= 0:
+        fit_parameters(initial, target)
+        return initial.copy(), target.copy()
+    surface = fit_surface(initial, target, closed)
+    u = tessellation_parameters(surface.params, per_span)
+    return surface.base(u), surface.top(u)

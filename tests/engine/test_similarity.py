@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.distance import cdist
 
+from engine.ccsm.ccs import build_ccs
 from engine.ccsm.similarity import (
     SimilarityReference,
     discrete_frechet_distance,
@@ -23,6 +24,7 @@ from engine.evaluation.levels import eval_params
 from engine.evaluation.pipeline import evaluate_contour
 from engine.io.sample import sample_contours_path
 from engine.io.source import read_source
+from engine.params import BuildParams
 from engine.types import Contour
 
 HYPOTHESIS = settings(deadline=None, max_examples=60)
@@ -192,3 +194,43 @@ def test_short_sample_contours_have_a_falling_ccsm_similarity(
 def test_similarity_reference_rejects_a_zero_length_contour() -> None:
     with pytest.raises(InvalidParameter):
         SimilarityReference.of(np.array([[1.0, 1.0], [1.0, 1.0]]), closed=False)
+
+
+def slice_by_slice(reference: SimilarityReference, base: np.ndarray, top: np.ndarray, ts: np.ndarray) -> np.ndarray:
+    """Sim of each slice measured on its own, a ring's slice without its repeated last point (eq. 9)."""
+    slices = [(1.0 - t) * base + t * top for t in ts]
+    return np.array([reference.similarity(s[:-1] if reference.closed else s) for s in slices])
+
+
+@pytest.mark.parametrize("contour_id", ["560:49", "260:6", "740:12", "260:2", "360:107", "580:52"])
+def test_slice_similarities_equal_the_similarity_of_each_slice(
+    contour_id: str, sample_by_id: dict[str, Contour]
+) -> None:
+    contour = sample_by_id[contour_id]
+    ccs = build_ccs(contour, BuildParams())
+    reference = SimilarityReference.of(contour.coords, contour.closed)
+    ts = np.linspace(0.0, 1.0, 11)
+    np.testing.assert_array_equal(
+        reference.slice_similarities(ccs.base, ccs.top, ts), slice_by_slice(reference, ccs.base, ccs.top, ts)
+    )
+
+
+def test_slice_similarities_of_rows_whose_slice_folds_onto_itself() -> None:
+    # Two points swap places between the rows: at t = 0.5 they coincide, a zero-length segment in the slice.
+    base = np.array([[0.0, 0.0], [40.0, 5.0], [80.0, 0.0], [120.0, 0.0], [160.0, 3.0], [200.0, 0.0]])
+    top = base.copy()
+    top[2], top[3] = base[3], base[2]
+    reference = SimilarityReference.of(base, closed=False)
+    ts = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
+    sims = reference.slice_similarities(base, top, ts)
+    np.testing.assert_array_equal(sims, slice_by_slice(reference, base, top, ts))
+    assert sims[0] == pytest.approx(1.0, abs=1e-12)
+    assert sims[2] < sims[0]
+
+
+def test_slice_similarities_need_a_rings_rows_closed() -> None:
+    angle = np.linspace(0.0, 2 * np.pi, 30, endpoint=False)
+    ring = np.column_stack([np.cos(angle), np.sin(angle)]) * 200.0
+    reference = SimilarityReference.of(ring, closed=True)
+    with pytest.raises(InvalidParameter):
+        reference.slice_similarities(ring, ring * 0.9, np.array([0.0, 1.0]))

@@ -14,6 +14,7 @@ from engine.ccsm.surface import (
     averaged_knots,
     averaged_parameters,
     fit_surface,
+    surface_rows,
     tessellation_parameters,
     wireframe,
 )
@@ -184,3 +185,35 @@ def test_geomdl_boundary_curves_are_the_surface_at_heights_0_and_1() -> None:
     assert_allclose(np.array(top.evaluate_list(list(u))), surface.evaluate(u, 1.0)[:, :2], atol=SURFACE_ATOL)
     # and the curves pass through their data points (global interpolation)
     assert_allclose(np.array(base.evaluate_list(list(surface.params))), initial, atol=SURFACE_ATOL)
+
+
+@pytest.mark.parametrize("closed", [False, True])
+def test_surface_rows_at_the_data_parameters_are_the_fitted_curves_there(closed: bool) -> None:
+    # The rows are taken from the samples without a solve; the fitted curves must pass through the same points.
+    initial, target = ring_samples() if closed else open_samples(5, 30)
+    surface = fit_surface(initial, target, closed)
+    base, top = surface_rows(initial, target, closed, per_span=0)
+    assert_allclose(base, surface.base(surface.params), rtol=0, atol=SURFACE_ATOL)
+    assert_allclose(top, surface.top(surface.params), rtol=0, atol=SURFACE_ATOL)
+
+
+@pytest.mark.parametrize("closed", [False, True])
+def test_surface_rows_between_data_parameters_follow_the_fitted_curves(closed: bool) -> None:
+    initial, target = ring_samples() if closed else open_samples(6, 30)
+    surface = fit_surface(initial, target, closed)
+    u = tessellation_parameters(surface.params, 3)
+    base, top = surface_rows(initial, target, closed, per_span=3)
+    assert base.shape == (4 * (len(initial) - 1) + 1, 2)
+    assert_allclose(base, surface.base(u), rtol=0, atol=SURFACE_ATOL)
+    assert_allclose(top, surface.top(u), rtol=0, atol=SURFACE_ATOL)
+    # The extra rows lie on the curves between samples, not on the straight chords between them.
+    chord_mid = (initial[:-1] + initial[1:]) / 2
+    assert np.max(np.hypot(*(base[2::4] - chord_mid).T)) > 0.01
+
+
+def test_surface_rows_without_a_fit_still_reject_repeated_samples() -> None:
+    initial, target = open_samples(7, 10)
+    initial[4] = initial[3]
+    target[4] = target[3]
+    with pytest.raises(SurfaceFitError):
+        surface_rows(initial, target, False, per_span=0)
