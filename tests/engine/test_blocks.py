@@ -129,3 +129,31 @@ def test_repair_by_small_blocks_makes_the_surfaces_of_the_repair_over_the_whole_
         surfaces, model.ladder, checked_ladder_steps(model), InputTouches([s.at(0.0) for s in surfaces])
     )
     assert left == set()
+
+
+def test_a_block_task_carries_its_own_surfaces_whole_and_the_others_cut_to_their_stretches(tmp_path) -> None:
+    from engine.ccsm.blocks import _block_tasks
+    from engine.ccsm.spool import surface_of
+    from engine.store.spool import DiskSpool
+
+    surfaces = random_lines()
+    spool = DiskSpool(tmp_path)
+    spool.put_many(enumerate(surfaces))
+    pieces = PieceIndex()
+    pieces.put(range(len(surfaces)), surfaces)
+    found = spatial_blocks(surface_boxes(surfaces), pieces, per_block=8)
+    cut = 0
+    for b, (near, own, *_) in zip(found, _block_tasks(found, spool, np.ones(2), [0]), strict=True):
+        assert [int(b.near[k]) for k in own] == b.own.tolist()
+        for k, (i, f, la) in enumerate(zip(b.near.tolist(), b.first.tolist(), b.last.tolist(), strict=True)):
+            s = surface_of(near[k])
+            whole = surfaces[i]
+            if f < 0:
+                assert isinstance(near[k], bytes)  # shipped as stored, opened in the worker
+                np.testing.assert_array_equal(s.base, whole.base)
+            else:
+                np.testing.assert_array_equal(s.base, whole.base[f : la + 1])
+                np.testing.assert_array_equal(s.top, whole.top[f : la + 1])
+                cut += len(s.base) < len(whole.base)
+    spool.close()
+    assert cut > 0
