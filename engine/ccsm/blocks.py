@@ -53,8 +53,10 @@ class PieceIndex:
     """The swept boxes of every surface's pieces, by surface number; a rebuilt surface's pieces replace its old
     ones (:meth:`put`).
 
-    The pieces are kept in a few flat arrays, not an array per surface: a big set has hundreds of thousands of
-    surfaces, and per-surface arrays cost more in their overhead than in their numbers.
+    A big set has a million pieces, so they are kept compact: float32 boxes rounded outward (a box may grow by
+    a float32 step, half a metre at UTM coordinates, which only adds candidates; it never loses one), int32
+    rows and owners, 28 bytes a piece. Each :meth:`put` adds a segment of pieces; :meth:`arrays` merges the
+    segments into one owner-sorted array, leaving out replaced pieces, only when asked.
 
     >>> from engine.ccsm.ccs import CCS
     >>> line = np.column_stack([np.arange(40.0), np.zeros(40)])
@@ -65,85 +67,75 @@ class PieceIndex:
     """
 
     def __init__(self) -> None:
-        self._boxes = np.zeros((0, 4))
-        self._first = np.zeros(0, dtype=np.intp)
-        self._last = np.zeros(0, dtype=np.intp)
-        self._owner = np.zeros(0, dtype=np.intp)  # -1: a replaced piece, dropped at the next compaction
-        self._size = 0
-        self._sorted = True  # pieces in owner order, none replaced
-        # Each surface's pieces: positions [_at[i], _at[i] + _count[i]) of the arrays (_at[i] = -1: none).
-        self._at = np.zeros(0, dtype=np.intp)
-        self._count = np.zeros(0, dtype=np.intp)
+        # Segments of (boxes (k, 4) float32, first (k,) int32, last (k,) int32, owner (k,) int32), the first
+        # one the merged pieces of every earlier segment.
+        self._segments: list[tuple[NDArray[np.float32], NDArray[np.int32], NDArray[np.int32], NDArray[np.int32]]]
+        self._segments = []
+        self._version = np.zeros(0, dtype=np.int32)  # how many times each surface was put
+        self._stale = 0  # pieces of replaced surfaces still in the segments
 
     def put(self, numbers: Sequence[int], surfaces: Sequence[CCS]) -> None:
         """Index ``surfaces`` as numbers ``numbers`` (one vectorised pass for them all)."""
         if not len(surfaces):
             return
-        numbers_arr = np.asarray(numbers, dtype=np.intp)
+        numbers_arr = np.asarray(numbers, dtype=np.int32)
         sizes = np.array([len(s.base) for s in surfaces], dtype=np.intp)
         first, last, owner = piece_ranges(sizes, INDEX_PIECE_SEGMENTS)
         base = np.concatenate([s.base for s in surfaces])
         top = np.concatenate([s.top for s in surfaces])
-        lo = per_piece(np.minimum, np.minimum(base, top), first, last)
-        hi = per_piece(np.maximum, np.maximum(base, top), first, last)
+        lo = _round(per_piece(np.minimum, np.minimum(base, top), first, last), -np.inf)
+        hi = _round(per_piece(np.maximum, np.maximum(base, top), first, last), np.inf)
         offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-        self._forget(numbers_arr)
-        counts = np.bincount(owner, minlength=len(surfaces))
-        self._at[numbers_arr] = self._size + np.concatenate([[0], np.cumsum(counts)[:-1]])
-        self._count[numbers_arr] = counts
-        self._append(np.hstack([lo, hi]), first - offsets[owner], last - offsets[owner], numbers_arr[owner])
-
-    def _forget(self, numbers: NDArray[np.intp]) -> None:
-        """Mark the pieces of surfaces ``numbers`` replaced (making room for their numbers first)."""
-        top = int(numbers.max()) + 1
-        if top > len(self._at):
-            grown = max(top, len(self._at) * 3 // 2)
-            self._at = np.concatenate([self._at, np.full(grown - len(self._at), -1, dtype=np.intp)])
-            self._count = np.concatenate([self._count, np.zeros(grown - len(self._count), dtype=np.intp)])
-        held = numbers[self._at[numbers] >= 0]
-        if len(held):
-            self._owner[concatenated_ranges(self._at[held], self._count[held])] = -1
-            self._sorted = False
-        elif self._size and int(numbers.min()) <= int(self._owner[self._size - 1]):
-            self._sorted = False  # new numbers, but not after the last ones
-
-    def _append(
-        self, boxes: NDArray[np.float64], first: NDArray[np.intp], last: NDArray[np.intp], owner: NDArray[np.intp]
-    ) -> None:
-        need = self._size + len(owner)
-        if need > len(self._owner):  # grow by half again: appends stay amortised O(1)
-            cap = max(need, len(self._owner) * 3 // 2, 1024)
-            self._boxes = np.resize(self._boxes, (cap, 4))
-            self._first, self._last = np.resize(self._first, cap), np.resize(self._last, cap)
-            self._owner = np.resize(self._owner, cap)
-        at = slice(self._size, need)
-        self._boxes[at], self._first[at], self._last[at], self._owner[at] = boxes, first, last, owner
-        self._size = need
-
-    def _compact(self) -> None:
-        """Drop replaced pieces and put the rest in owner order (rebuilt surfaces' pieces come last)."""
-        owner = self._owner[: self._size]
-        keep = np.flatnonzero(owner >= 0)
-        keep = keep[np.argsort(owner[keep], kind="stable")]
-        self._boxes = self._boxes[keep]
-        self._first, self._last, self._owner = self._first[keep], self._last[keep], self._owner[keep]
-        self._size = len(keep)
-        self._sorted = True
-        counts = np.bincount(self._owner, minlength=len(self._at))
-        self._at = np.where(counts > 0, np.cumsum(counts) - counts, -1).astype(np.intp)
-        self._count = counts.astype(np.intp)
+        top_number = int(numbers_arr.max()) + 1
+        if top_number > len(self._version):
+            self._version = np.concatenate([self._version, np.zeros(top_number - len(self._version), np.int32)])
+        self._stale += int(np.count_nonzero(self._version[numbers_arr]))  # their old pieces are left out later
+        self._version[numbers_arr] += 1
+        self._segments.append(
+            (
+                np.hstack([lo, hi]),
+                (first - offsets[owner]).astype(np.int32),
+                (last - offsets[owner]).astype(np.int32),
+                numbers_arr[owner],
+            )
+        )
 
     def arrays(
         self,
-    ) -> tuple[NDArray[np.float64], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]:
+    ) -> tuple[NDArray[np.float32], NDArray[np.int32], NDArray[np.int32], NDArray[np.int32], NDArray[np.intp]]:
         """(boxes (P, 4), first row, last row, owner, start) of every piece, sorted by owner; ``start[i]`` is
         the first piece of surface i (``start`` has one more entry, the number of pieces)."""
-        if not self._sorted:
-            self._compact()
-        n = self._size
-        owner = self._owner[:n]
-        counts = np.bincount(owner + 1, minlength=int(owner[-1]) + 2) if n else np.zeros(1, dtype=np.intp)
-        return self._boxes[:n], self._first[:n], self._last[:n], owner, np.cumsum(counts).astype(np.intp)
+        if len(self._segments) > 1 or self._stale:
+            self._merge()
+        if not self._segments:
+            empty = np.zeros(0, dtype=np.int32)
+            return np.zeros((0, 4), np.float32), empty, empty, empty, np.zeros(1, dtype=np.intp)
+        boxes, first, last, owner = self._segments[0]
+        counts = np.bincount(owner + 1, minlength=int(owner[-1]) + 2) if len(owner) else np.zeros(1, np.intp)
+        return boxes, first, last, owner, np.cumsum(counts).astype(np.intp)
+
+    def _merge(self) -> None:
+        """One owner-sorted segment of the latest pieces of each surface (a surface's latest segment wins)."""
+        owners = np.concatenate([seg[3] for seg in self._segments])
+        # Each piece's segment; a surface's pieces of an older segment than its latest are replaced ones.
+        segment_of = np.repeat(np.arange(len(self._segments)), [len(seg[3]) for seg in self._segments])
+        latest = np.zeros(len(self._version), dtype=np.intp)
+        np.maximum.at(latest, owners, segment_of)
+        keep = np.flatnonzero(segment_of == latest[owners])
+        keep = keep[np.argsort(owners[keep], kind="stable")]
+        del owners, segment_of
+        merged = tuple(np.concatenate([seg[k] for seg in self._segments])[keep] for k in range(4))
+        self._segments = [merged]  # type: ignore[list-item]
+        self._stale = 0
+
+
+def _round(values: NDArray[np.float64], direction: float) -> NDArray[np.float32]:
+    """float32 of ``values``, each rounded toward ``direction`` where float32 cannot hold it exactly."""
+    out = values.astype(np.float32)
+    wide = out.astype(np.float64)
+    off = wide > values if direction < 0 else wide < values  # rounded the wrong way
+    out[off] = np.nextafter(out[off], np.float32(direction))
+    return out
 
 
 @dataclass(frozen=True)
@@ -219,29 +211,35 @@ def spatial_blocks(
     return blocks
 
 
-def _boxes(boxes: NDArray[np.float64]) -> NDArray[np.object_]:
+def _boxes(boxes: NDArray[np.floating]) -> NDArray[np.object_]:
     return shapely.box(boxes[:, 0], boxes[:, 1], boxes[:, 2], boxes[:, 3])
 
 
 #: Pieces per bucket of the grid that narrows a block's search to the pieces around it.
 PIECES_PER_BUCKET = 256
+#: Boxes filed at a time.
+FILE_CHUNK = 1 << 16
 
 
 class _Buckets:
     """Pieces filed by the cells of a square grid their boxes overlap (a piece across a cell edge is in both)."""
 
-    def __init__(self, boxes: NDArray[np.float64]) -> None:
+    def __init__(self, boxes: NDArray[np.floating]) -> None:
         self.side = max(1, math.ceil(math.sqrt(len(boxes) / PIECES_PER_BUCKET)))
         self.lo = boxes[:, :2].min(axis=0) if len(boxes) else np.zeros(2)
         extent = (boxes[:, 2:].max(axis=0) - self.lo) if len(boxes) else np.ones(2)
         self.cell = np.maximum(extent / self.side, 1e-9)
-        cells, piece = self._cells_of(boxes)
+        # Filed a chunk of boxes at a time: the temporaries of filing a million boxes at once were 100+ MB.
+        filed = [self._cells_of(boxes[k : k + FILE_CHUNK], k) for k in range(0, len(boxes), FILE_CHUNK)]
+        cells = np.concatenate([c for c, _ in filed]) if filed else np.zeros(0, dtype=np.int32)
+        piece = np.concatenate([p for _, p in filed]) if filed else np.zeros(0, dtype=np.int32)
+        del filed
         order = np.argsort(cells, kind="stable")
         self.pieces = piece[order]
         self.start = np.searchsorted(cells[order], np.arange(self.side * self.side + 1)).astype(np.intp)
 
-    def _cells_of(self, boxes: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-        """Every (cell, box index) pair of a cell a box overlaps."""
+    def _cells_of(self, boxes: NDArray[np.floating], first: int = 0) -> tuple[NDArray[np.int32], NDArray[np.int32]]:
+        """Every (cell, box index) pair of a cell a box overlaps (box indices counted from ``first``)."""
         c0 = np.clip(np.floor((boxes[:, :2] - self.lo) / self.cell), 0, self.side - 1).astype(np.intp)
         c1 = np.clip(np.floor((boxes[:, 2:] - self.lo) / self.cell), 0, self.side - 1).astype(np.intp)
         nx, ny = c1[:, 0] - c0[:, 0] + 1, c1[:, 1] - c0[:, 1] + 1
@@ -250,9 +248,9 @@ class _Buckets:
         k = concatenated_ranges(np.zeros(len(boxes), dtype=np.intp), counts)
         ix = c0[which, 0] + k % nx[which]
         iy = c0[which, 1] + k // nx[which]
-        return (iy * self.side + ix).astype(np.intp), which
+        return (iy * self.side + ix).astype(np.int32), (which + first).astype(np.int32)
 
-    def near(self, boxes: NDArray[np.float64]) -> NDArray[np.intp]:
+    def near(self, boxes: NDArray[np.floating]) -> NDArray[np.intp]:
         """Sorted indices of the pieces filed in any cell that one of ``boxes`` overlaps."""
         cells = np.unique(self._cells_of(boxes)[0])
         return np.unique(
@@ -263,9 +261,9 @@ class _Buckets:
 def _block(
     own: NDArray[np.intp],
     hit: NDArray[np.intp],
-    first: NDArray[np.intp],
-    last: NDArray[np.intp],
-    owner: NDArray[np.intp],
+    first: NDArray[np.integer],
+    last: NDArray[np.integer],
+    owner: NDArray[np.integer],
 ) -> Block:
     """A block from its own contours and the pieces that meet theirs: each other contour's stretch is the rows
     from its first to its last piece met."""
@@ -320,12 +318,21 @@ def _block_tasks(
     surfaces as the spool keeps them, every other one cut to its near stretch here, so that a long contour
     passing by is not shipped whole to every block it passes (a task's size follows the block's rows)."""
     for b in blocks:
-        near = [
-            payload if f < 0 else _stretch(surface_of(payload), f, la)
-            for payload, f, la in zip(spool.get_payloads(b.near.tolist()), b.first, b.last, strict=True)
-        ]
+        near: list[CCS | bytes] = []
+        # A few surfaces read at a time: whole, the long contours passing by a block can weigh far more than
+        # their stretches, and the block's task holds only those.
+        for k in range(0, len(b.near), NEAR_READ_BATCH):
+            at = slice(k, k + NEAR_READ_BATCH)
+            payloads = spool.get_payloads(b.near[at].tolist())
+            near.extend(
+                p if f < 0 else _stretch(surface_of(p), f, la)
+                for p, f, la in zip(payloads, b.first[at].tolist(), b.last[at].tolist(), strict=True)
+            )
         yield near, np.searchsorted(b.near, b.own).tolist(), ladder, steps
 
+
+#: Surfaces of a block read from the spool at a time while its task is made.
+NEAR_READ_BATCH = 32
 
 #: Bytes of block tasks in flight (sent and not yet answered) before the next block is read: with the
 #: look-ahead's count alone, a run of blocks of long contours held hundreds of MB in the build process.
