@@ -17,7 +17,6 @@ from numpy.typing import NDArray
 from engine.intervals import is_index
 from engine.store.sqlite import ContourRecord
 from engine.tiles.runs import CHUNK_ROWS, chunk_bounds_packed
-from engine.tiles.significance import row_significance
 
 #: Bytes per stored vertex a dataset pack holds, about (to decide whether a dataset fits the contour memory).
 PACK_BYTES_PER_VERTEX = 120
@@ -113,7 +112,7 @@ class DatasetPack:
         orig_sig = np.zeros(0, np.float32)
         if recs:
             ccs_sig = np.column_stack(
-                [np.concatenate([r.sig for r in recs]), np.concatenate([row_significance(r.top) for r in recs])]
+                [np.concatenate([r.sig for r in recs]), np.concatenate([r.sig_top for r in recs])]
             ).astype(np.float32)
             orig_sig = np.concatenate([r.sig_original for r in recs]).astype(np.float32)
         elevation = np.array([float(r.elevation) for r in recs])

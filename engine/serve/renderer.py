@@ -20,12 +20,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from engine.cartography.dataset import DatasetCartography, dataset_cartography, label_columns, label_sources
-from engine.cartography.labels import LabelAnchors, place_labels
+from engine.cartography.dataset import DatasetCartography, dataset_cartography, label_columns
+from engine.cartography.labels import LabelAnchors
 from engine.ccsm.regression import t_at_scales
 from engine.checks import check_method, check_t
 from engine.intervals import infer_interval
 from engine.serve.cache import LRUCache
+from engine.serve.labels import DEFAULT_MAX_ZOOM, label_anchors, label_last_zoom, place_dataset_labels
 from engine.serve.methods import Method, TileContext, TileLines, make_methods
 from engine.serve.pack import PACK_BYTES_PER_VERTEX, DatasetPack
 from engine.store.sqlite import CCSStore, ContourRecord, DatasetInfo
@@ -49,8 +50,6 @@ MORPH_START_LAYER = "contours"
 MORPH_END_LAYER = "contours_end"
 #: The point layer of contour labels in tiles and morph tiles (docs/design.md section 9.3).
 LABEL_LAYER = "contour_labels"
-#: Contours read from the store at a time while label anchors are placed.
-LABEL_BATCH = 512
 
 
 @dataclass(frozen=True)
@@ -62,7 +61,7 @@ class TileOptions:
     buffer_px: int = 64
     layer: str = "contours"
     min_zoom: int = 0
-    max_zoom: int = 16
+    max_zoom: int = DEFAULT_MAX_ZOOM
     snap_rounding: bool = True
 
 
@@ -207,23 +206,29 @@ class Renderer:
         return DatasetPack.of(info.data_version, recs, interval), np.arange(len(recs))
 
     def labels(self, dataset: str) -> LabelAnchors:
-        """The dataset's label anchors on index contours, placed once per data version (docs/design.md
-        section 9.3)."""
+        """The dataset's label anchors on index contours (docs/design.md section 9.3): those the build stored
+        with the data version, read once per version.
+
+        A version stored without them, or placed for another served zoom range, has them placed here instead,
+        once per data version (a minute or more for a large dataset).
+        """
         info, _ = self.info(dataset)
         cached = self._labels.get(dataset)
         if cached is not None and cached[0] == info.data_version:
             return cached[1]
-        carto = self.cartography(dataset)
+        last_zoom = label_last_zoom(self.options.max_zoom)
+        stored = self.store.labels(dataset)
+        if stored is not None and stored.data_version == info.data_version and stored.last_zoom == last_zoom:
+            anchors = label_anchors(stored)
+            self._labels[dataset] = (stored.data_version, anchors)
+            return anchors
         with self._labels_lock:
             cached = self._labels.get(dataset)
             if cached is not None and cached[0] == info.data_version:
                 return cached[1]
-            fids = self.store.all_fids(dataset)
-            sources = []
-            for k in range(0, len(fids), LABEL_BATCH):
-                sources.extend(label_sources(carto, self.store.load(fids[k : k + LABEL_BATCH])))
-            anchors = place_labels(sources, info.ladder, carto.latitude, float(self.options.max_zoom) + 1)
-            self._labels[dataset] = (info.data_version, anchors)
+            placed = place_dataset_labels(self.store, dataset, self.options.max_zoom)
+            anchors = label_anchors(placed)
+            self._labels[dataset] = (placed.data_version, anchors)
         return anchors
 
     def label_layer(self, dataset: str, tile: Tile) -> bytes:

@@ -34,7 +34,7 @@ from engine.errors import BuildCancelled, StoreError, StoreUnwritable, UnknownLa
 from engine.types import Coords
 
 #: Bumped whenever the layout of the file changes; a store of another format is refused.
-STORE_FORMAT = 2
+STORE_FORMAT = 3
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS store_meta(key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -78,9 +78,24 @@ CREATE TABLE IF NOT EXISTS contours(
     sim_t BLOB NOT NULL,
     sim BLOB NOT NULL,
     sig BLOB NOT NULL,
+    sig_top BLOB NOT NULL,
     sig_original BLOB NOT NULL
 );
 CREATE INDEX IF NOT EXISTS contours_dataset ON contours(dataset);
+CREATE TABLE IF NOT EXISTS labels(
+    dataset TEXT PRIMARY KEY,
+    data_version INTEGER NOT NULL,
+    last_zoom REAL NOT NULL,
+    n INTEGER NOT NULL,
+    xy BLOB NOT NULL,
+    angle BLOB NOT NULL,
+    min_zoom BLOB NOT NULL,
+    fid BLOB NOT NULL,
+    rank BLOB NOT NULL,
+    elevation BLOB NOT NULL,
+    text TEXT NOT NULL,
+    box_px BLOB NOT NULL
+);
 CREATE VIRTUAL TABLE IF NOT EXISTS contour_rtree USING rtree(fid, minx, maxx, miny, maxy, +dataset TEXT);
 CREATE TABLE IF NOT EXISTS builds(
     dataset TEXT PRIMARY KEY,
@@ -149,9 +164,10 @@ class ContourRecord:
         (S,) t at each scale of the dataset's ladder.
     sim_t, sim
         The Sim(t) table.
-    sig, sig_original
-        (M,) and (n,) float32 significance of each row of base/top and of the original, EPSG:3857 metres
-        (:mod:`engine.tiles.significance`): a tile whose grid unit is u skips rows below u / 2.
+    sig, sig_top, sig_original
+        (M,), (M,) and (n,) float32 significance of each row of base/top together, of top alone (for a contour
+        drawn at t = 1) and of the original, EPSG:3857 metres (:mod:`engine.tiles.significance`): a tile whose
+        grid unit is u skips rows below u / 2.
     """
 
     fid: int
@@ -170,6 +186,7 @@ class ContourRecord:
     sim_t: NDArray[np.float64]
     sim: NDArray[np.float64]
     sig: NDArray[np.float32]
+    sig_top: NDArray[np.float32]
     sig_original: NDArray[np.float32]
 
     @property
@@ -216,8 +233,35 @@ class NewContour:
     sim_t: NDArray[np.float64]
     sim: NDArray[np.float64]
     sig: NDArray[np.float32]
+    sig_top: NDArray[np.float32]
     sig_original: NDArray[np.float32]
     box: tuple[float, float, float, float]
+
+
+@dataclass(frozen=True)
+class StoredLabels:
+    """A dataset version's label anchors as stored (the arrays of
+    :class:`engine.cartography.labels.LabelAnchors`), placed for zooms up to ``last_zoom``.
+
+    Written with the contour rows (their fids are only known inside the write transaction), so a tile never
+    places labels itself.
+    """
+
+    data_version: int
+    last_zoom: float
+    xy: NDArray[np.float64]
+    angle: NDArray[np.float64]
+    min_zoom: NDArray[np.float64]
+    fid: NDArray[np.int64]
+    rank: NDArray[np.int64]
+    elevation: NDArray[np.float64]
+    text: list[str]
+    box_px: NDArray[np.float64]
+
+
+#: Places a dataset's labels once its rows and metadata are written: called inside the write transaction on
+#: the writing thread, whose reads (``dataset``, ``load``, ...) see the new version before it is committed.
+LabelPlacer = Callable[[], StoredLabels]
 
 
 @dataclass(frozen=True)
@@ -266,6 +310,7 @@ def _contour_row(dataset: str, c: NewContour) -> tuple[Any, ...]:
         _blob(c.sim_t),
         _blob(c.sim),
         np.asarray(c.sig, dtype="<f4").tobytes(),
+        np.asarray(c.sig_top, dtype="<f4").tobytes(),
         np.asarray(c.sig_original, dtype="<f4").tobytes(),
     )
 
@@ -488,6 +533,7 @@ class CCSStore:
         progress: Callable[[int, int], None] | None = None,
         *,
         only_if_building: bool = False,
+        labels: LabelPlacer | None = None,
     ) -> DatasetInfo:
         """Write a dataset, replacing any previous version, in one transaction.
 
@@ -496,7 +542,9 @@ class CCSStore:
         counts, goes in last). An exception (or a killed process) before COMMIT leaves the previous version
         untouched. With ``only_if_building`` the write happens only while the dataset's build is still
         recorded (checked inside the transaction), so a dataset deleted during its build never comes back:
-        BuildCancelled is raised instead. ``progress`` gets (rows written, rows known so far).
+        BuildCancelled is raised instead. ``progress`` gets (rows written, rows known so far). ``labels``, when
+        given, is called after the rows and the dataset's row are in, and its anchors are written in the same
+        transaction (with the new ``data_version``).
         """
         with self._write() as cur:
             if only_if_building and not self._is_building(cur, dataset):
@@ -508,7 +556,7 @@ class CCSStore:
                 cur.execute(
                     "INSERT INTO contours(dataset, contour_id, elevation, closed, grp, vanish_scale, "
                     "length_m, n_rows, n_input, base, top, original, original_w, t_at_scale, sim_t, sim, sig, "
-                    "sig_original) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                    "sig_top, sig_original) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                     _contour_row(dataset, c),
                 )
                 cur.execute("INSERT INTO contour_rtree VALUES (?,?,?,?,?,?)", (cur.lastrowid, *c.box, dataset))
@@ -545,8 +593,49 @@ class CCSStore:
                     json.dumps(meta.bad_features),
                 ),
             )
+            if labels is not None:
+                self._insert_labels(cur, dataset, counter, labels())
             cur.execute("DELETE FROM builds WHERE dataset=?", (dataset,))
         return self.dataset(dataset)
+
+    @staticmethod
+    def _insert_labels(cur: sqlite3.Cursor, dataset: str, data_version: int, labels: StoredLabels) -> None:
+        cur.execute(
+            "INSERT INTO labels VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
+            (
+                dataset,
+                data_version,
+                float(labels.last_zoom),
+                len(labels.fid),
+                _blob(labels.xy),
+                _blob(labels.angle),
+                _blob(labels.min_zoom),
+                np.asarray(labels.fid, dtype="<i8").tobytes(),
+                np.asarray(labels.rank, dtype="<i8").tobytes(),
+                _blob(labels.elevation),
+                json.dumps(list(labels.text)),
+                _blob(labels.box_px),
+            ),
+        )
+
+    def labels(self, dataset: str) -> StoredLabels | None:
+        """The label anchors stored with the dataset's current version, or None (none were placed at build)."""
+        columns = "data_version, last_zoom, xy, angle, min_zoom, fid, rank, elevation, text, box_px"
+        row = self._con().execute(f"SELECT {columns} FROM labels WHERE dataset=?", (dataset,)).fetchone()
+        if row is None:
+            return None
+        return StoredLabels(
+            data_version=int(row[0]),
+            last_zoom=float(row[1]),
+            xy=_array(row[2], 2),
+            angle=_array(row[3]),
+            min_zoom=_array(row[4]),
+            fid=np.frombuffer(row[5], dtype="<i8"),
+            rank=np.frombuffer(row[6], dtype="<i8"),
+            elevation=_array(row[7]),
+            text=list(json.loads(row[8])),
+            box_px=_array(row[9], 2),
+        )
 
     @staticmethod
     def _delete_rows(cur: sqlite3.Cursor, dataset: str) -> None:
@@ -554,6 +643,7 @@ class CCSStore:
             "DELETE FROM contour_rtree WHERE fid IN (SELECT fid FROM contours WHERE dataset=?)", (dataset,)
         )
         cur.execute("DELETE FROM contours WHERE dataset=?", (dataset,))
+        cur.execute("DELETE FROM labels WHERE dataset=?", (dataset,))
         cur.execute("DELETE FROM datasets WHERE id=?", (dataset,))
 
     def delete(self, dataset: str) -> bool:
@@ -666,7 +756,7 @@ class CCSStore:
             marks = ",".join("?" * len(chunk))
             for r in con.execute(
                 "SELECT fid, dataset, contour_id, elevation, closed, grp, vanish_scale, length_m, base, top, "
-                f"original, original_w, t_at_scale, sim_t, sim, sig, sig_original FROM contours "
+                f"original, original_w, t_at_scale, sim_t, sim, sig, sig_top, sig_original FROM contours "
                 f"WHERE fid IN ({marks})",
                 chunk,
             ):
@@ -687,7 +777,8 @@ class CCSStore:
                     sim_t=_array(r[13]),
                     sim=_array(r[14]),
                     sig=np.frombuffer(r[15], dtype="<f4"),
-                    sig_original=np.frombuffer(r[16], dtype="<f4"),
+                    sig_top=np.frombuffer(r[16], dtype="<f4"),
+                    sig_original=np.frombuffer(r[17], dtype="<f4"),
                 )
         return [out[f] for f in fids if f in out]
 
