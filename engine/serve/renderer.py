@@ -7,7 +7,8 @@ quantise and drop repeats in one compiled pass -> clip the runs that cross the b
 
 Every method goes through this one pipeline. A dataset that fits the contour memory is held as one
 :class:`~engine.serve.pack.DatasetPack` (built once per data version); a larger one is packed per request
-from the contours the tile touches, through an LRU cache of decoded rows (the same tiles, more work each).
+from the stretches of the touched contours' rows that meet the tile, read from their stored pieces
+(:mod:`engine.serve.pieces`; the same tiles, about the same work).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from engine.serve.cache import LRUCache
 from engine.serve.labels import DEFAULT_MAX_ZOOM, label_anchors, label_last_zoom, place_dataset_labels
 from engine.serve.methods import Method, TileContext, TileLines, make_methods
 from engine.serve.pack import PACK_BYTES_PER_VERTEX, DatasetPack
+from engine.serve.pieces import pack_of_pieces
 from engine.store.sqlite import CCSStore, ContourRecord, DatasetInfo
 from engine.tiles.clip import clip_lines_exact, clip_lines_fast
 from engine.tiles.crossings import lines_cross_in_grid
@@ -191,8 +193,11 @@ class Renderer:
             out = [r if r is not None else loaded.get(f) for f, r in zip(fids, out, strict=True)]
         return [r for r in out if r is not None]
 
-    def packed(self, dataset: str, fids: Sequence[int]) -> tuple[DatasetPack, NDArray[np.intp]]:
-        """A pack holding ``fids`` and their positions in it: the dataset's pack, or one of just these rows."""
+    def packed(
+        self, dataset: str, fids: Sequence[int], box: Bounds, rows: str | None
+    ) -> tuple[DatasetPack, NDArray[np.intp]]:
+        """A pack holding ``fids`` and their positions in it: the dataset's pack, or one of just the pieces of
+        these contours' ``rows`` (``ccs``, ``original`` or None) that meet ``box`` (:mod:`engine.serve.pieces`)."""
         pack = self.pack(dataset)
         where = pack.locate(fids) if pack is not None else None
         if pack is not None and where is None:  # the store changed under the pack: take the new version
@@ -202,8 +207,8 @@ class Renderer:
         if pack is not None and where is not None:
             return pack, where
         info, interval = self.info(dataset)
-        recs = self.records(fids)
-        return DatasetPack.of(info.data_version, recs, interval), np.arange(len(recs))
+        part = pack_of_pieces(self.store, dataset, fids, box, info.data_version, interval, rows)
+        return part, np.arange(len(part.fid))
 
     def labels(self, dataset: str) -> LabelAnchors:
         """The dataset's label anchors on index contours (docs/design.md section 9.3): those the build stored
@@ -312,7 +317,7 @@ class Renderer:
         fids = self.store.query(dataset, box)
         if not fids:
             return TileResult(None, 0, zoomf, scale)
-        pack, where = self.packed(dataset, fids)
+        pack, where = self.packed(dataset, fids, box, how.stored_rows)
         carto = self.cartography(dataset)
         idx = how.visible(pack, where, scale)
         idx = idx[carto.shown_in_tile(pack.elevation[idx], z)]
@@ -354,7 +359,7 @@ class Renderer:
         fids = self.store.query(dataset, box)
         if not fids:
             return TileResult(None, 0, float(z), float(scales[0]))
-        pack, where = self.packed(dataset, fids)
+        pack, where = self.packed(dataset, fids, box, "ccs")
         carto = self.cartography(dataset)
         idx = where[scales[-1] < pack.vanish[where]]  # drawn somewhere in the level: at its finest end
         idx = idx[carto.shown_in_tile(pack.elevation[idx], z)]

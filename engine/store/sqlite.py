@@ -35,6 +35,10 @@ from engine.types import Coords
 
 #: Bumped whenever the layout of the file changes; a store of another format is refused.
 STORE_FORMAT = 3
+#: Rows of a stored piece of a contour's rows (piece k holds rows k * PIECE_ROWS to (k + 1) * PIECE_ROWS, both
+#: included): a tile of a dataset too large to hold in memory reads only the pieces it meets. A multiple of the
+#: tiles' chunk rows (engine.serve.pieces checks it), so a piece's chunks are the whole line's.
+PIECE_ROWS = 256
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS store_meta(key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -59,6 +63,8 @@ CREATE TABLE IF NOT EXISTS datasets(
     ladder BLOB NOT NULL,
     bad_features TEXT NOT NULL
 );
+-- The small per-contour columns come before the rows: reading them (a tile's contour heads) does not walk
+-- the rows' overflow pages.
 CREATE TABLE IF NOT EXISTS contours(
     fid INTEGER PRIMARY KEY AUTOINCREMENT,
     dataset TEXT NOT NULL,
@@ -70,18 +76,38 @@ CREATE TABLE IF NOT EXISTS contours(
     length_m REAL NOT NULL,
     n_rows INTEGER NOT NULL,
     n_input INTEGER NOT NULL,
+    t_at_scale BLOB NOT NULL,
+    sim_t BLOB NOT NULL,
+    sim BLOB NOT NULL,
     base BLOB NOT NULL,
     top BLOB NOT NULL,
     original BLOB NOT NULL,
     original_w BLOB NOT NULL,
-    t_at_scale BLOB NOT NULL,
-    sim_t BLOB NOT NULL,
-    sim BLOB NOT NULL,
     sig BLOB NOT NULL,
     sig_top BLOB NOT NULL,
     sig_original BLOB NOT NULL
 );
 CREATE INDEX IF NOT EXISTS contours_dataset ON contours(dataset);
+CREATE TABLE IF NOT EXISTS ccs_pieces(
+    piece INTEGER PRIMARY KEY,
+    fid INTEGER NOT NULL,
+    k INTEGER NOT NULL,
+    base BLOB NOT NULL,
+    top BLOB NOT NULL,
+    sig BLOB NOT NULL,
+    sig_top BLOB NOT NULL
+);
+CREATE INDEX IF NOT EXISTS ccs_pieces_fid ON ccs_pieces(fid);
+CREATE VIRTUAL TABLE IF NOT EXISTS ccs_piece_rtree USING rtree(piece, minx, maxx, miny, maxy, +dataset TEXT);
+CREATE TABLE IF NOT EXISTS original_pieces(
+    piece INTEGER PRIMARY KEY,
+    fid INTEGER NOT NULL,
+    k INTEGER NOT NULL,
+    original BLOB NOT NULL,
+    sig_original BLOB NOT NULL
+);
+CREATE INDEX IF NOT EXISTS original_pieces_fid ON original_pieces(fid);
+CREATE VIRTUAL TABLE IF NOT EXISTS original_piece_rtree USING rtree(piece, minx, maxx, miny, maxy, +dataset TEXT);
 CREATE TABLE IF NOT EXISTS labels(
     dataset TEXT PRIMARY KEY,
     data_version INTEGER NOT NULL,
@@ -196,6 +222,34 @@ class ContourRecord:
 
 
 @dataclass(frozen=True)
+class ContourHead:
+    """The per-contour columns of a stored contour without its rows (see :class:`ContourRecord`)."""
+
+    fid: int
+    elevation: float
+    vanish_scale: float
+    t_at_scale: NDArray[np.float64]
+
+
+#: The kinds of stored pieces: of the CCS rows (columns base, top, sig, sig_top) and of the original (columns
+#: original, sig_original).
+PIECE_KINDS = {"ccs": ("base", "top", "sig", "sig_top"), "original": ("original", "sig_original")}
+
+
+@dataclass(frozen=True)
+class StoredPieces:
+    """Pieces of one kind of some contours' rows, concatenated: piece ``i`` is piece ``k[i]`` of contour
+    ``fid[i]`` and holds ``n[i]`` rows of each column (:data:`PIECE_KINDS`); piece k holds rows
+    ``k * PIECE_ROWS`` to ``(k + 1) * PIECE_ROWS`` of its contour, both included (consecutive pieces share a row).
+    """
+
+    fid: NDArray[np.int64]
+    k: NDArray[np.int64]
+    n: NDArray[np.int64]
+    columns: tuple[NDArray[Any], ...]
+
+
+@dataclass(frozen=True)
 class BuildStatus:
     """Progress of a build in progress, or the error of a failed one (``state``: building or failed)."""
 
@@ -291,6 +345,11 @@ def _array(b: bytes, cols: int = 0) -> NDArray[np.float64]:
     return a.reshape(-1, cols) if cols else a
 
 
+def _column(name: str, blob: bytes) -> NDArray[Any]:
+    """A stored piece's column: float32 significance, else (n, 2) float64 rows."""
+    return np.frombuffer(blob, dtype="<f4") if name.startswith("sig") else _array(blob, 2)
+
+
 def _contour_row(dataset: str, c: NewContour) -> tuple[Any, ...]:
     return (
         dataset,
@@ -313,6 +372,39 @@ def _contour_row(dataset: str, c: NewContour) -> tuple[Any, ...]:
         np.asarray(c.sig_top, dtype="<f4").tobytes(),
         np.asarray(c.sig_original, dtype="<f4").tobytes(),
     )
+
+
+def piece_rows(n: int, k: int) -> slice:
+    """The rows of piece ``k`` of ``n`` rows (empty beyond the last piece)."""
+    lo = k * PIECE_ROWS
+    if k and lo >= n - 1:
+        return slice(0, 0)
+    return slice(lo, min(lo + PIECE_ROWS, n - 1) + 1)
+
+
+def piece_count(n: int) -> int:
+    """Pieces of ``n`` rows (one at least)."""
+    return max(1, -(-(n - 1) // PIECE_ROWS))
+
+
+def _pieces(c: NewContour) -> Iterator[tuple[str, int, list[bytes], tuple[float, float, float, float]]]:
+    """The stored pieces of a contour: kind, k, the columns' bytes, and the box (minx, maxx, miny, maxy) of its
+    rows."""
+    f4 = "<f4"
+    for k in range(piece_count(len(c.base))):
+        s = piece_rows(len(c.base), k)
+        xy = np.concatenate([c.base[s], c.top[s]])
+        sig = [np.asarray(c.sig[s], dtype=f4).tobytes(), np.asarray(c.sig_top[s], dtype=f4).tobytes()]
+        yield "ccs", k, [_blob(c.base[s]), _blob(c.top[s]), *sig], _box(xy)
+    for k in range(piece_count(len(c.original))):
+        s = piece_rows(len(c.original), k)
+        sig_original = np.asarray(c.sig_original[s], dtype=f4).tobytes()
+        yield "original", k, [_blob(c.original[s]), sig_original], _box(c.original[s])
+
+
+def _box(xy: NDArray[np.float64]) -> tuple[float, float, float, float]:
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
 
 
 #: SQLite's messages for a write the file system refuses (full disk, read-only mount or file, I/O error).
@@ -559,7 +651,12 @@ class CCSStore:
                     "sig_top, sig_original) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                     _contour_row(dataset, c),
                 )
-                cur.execute("INSERT INTO contour_rtree VALUES (?,?,?,?,?,?)", (cur.lastrowid, *c.box, dataset))
+                fid = cur.lastrowid
+                cur.execute("INSERT INTO contour_rtree VALUES (?,?,?,?,?,?)", (fid, *c.box, dataset))
+                for kind, k, blobs, box in _pieces(c):
+                    marks = ",".join("?" * len(blobs))
+                    cur.execute(f"INSERT INTO {kind}_pieces VALUES (NULL,?,?,{marks})", (fid, k, *blobs))
+                    cur.execute(f"INSERT INTO {kind}_piece_rtree VALUES (?,?,?,?,?,?)", (cur.lastrowid, *box, dataset))
                 counts.add(c)
                 if progress and counts.n % step == 0:
                     progress(counts.n, counts.n)
@@ -642,6 +739,10 @@ class CCSStore:
         cur.execute(
             "DELETE FROM contour_rtree WHERE fid IN (SELECT fid FROM contours WHERE dataset=?)", (dataset,)
         )
+        for kind in PIECE_KINDS:
+            pieces = f"SELECT piece FROM {kind}_pieces WHERE fid IN (SELECT fid FROM contours WHERE dataset=?)"
+            cur.execute(f"DELETE FROM {kind}_piece_rtree WHERE piece IN ({pieces})", (dataset,))
+            cur.execute(f"DELETE FROM {kind}_pieces WHERE piece IN ({pieces})", (dataset,))
         cur.execute("DELETE FROM contours WHERE dataset=?", (dataset,))
         cur.execute("DELETE FROM labels WHERE dataset=?", (dataset,))
         cur.execute("DELETE FROM datasets WHERE id=?", (dataset,))
@@ -734,6 +835,37 @@ class CCSStore:
             (minx, maxx, miny, maxy, dataset),
         )
         return list(chain.from_iterable(cur))
+
+    def pieces_meeting(self, dataset: str, bounds_3857: Sequence[float], kind: str) -> StoredPieces:
+        """The dataset's pieces of one kind (``ccs`` or ``original``) whose rows' extent meets an EPSG:3857
+        rectangle, sorted by fid and k."""
+        minx, miny, maxx, maxy = (float(v) for v in bounds_3857)
+        names = PIECE_KINDS[kind]
+        columns = ", ".join(f"p.{c}" for c in names)
+        rows = self._con().execute(
+            f"SELECT p.fid, p.k, {columns} FROM {kind}_piece_rtree r JOIN {kind}_pieces p ON p.piece = r.piece "
+            "WHERE r.maxx >= ? AND r.minx <= ? AND r.maxy >= ? AND r.miny <= ? AND r.dataset = ? ORDER BY p.fid, p.k",
+            (minx, maxx, miny, maxy, dataset),
+        ).fetchall()
+        fid = np.array([r[0] for r in rows], dtype=np.int64)
+        k = np.array([r[1] for r in rows], dtype=np.int64)
+        n = np.array([len(r[2]) // 16 for r in rows], dtype=np.int64)  # the first column holds (x, y) float64
+        arrays = tuple(_column(name, b"".join([r[2 + j] for r in rows])) for j, name in enumerate(names))
+        return StoredPieces(fid, k, n, arrays)
+
+    def load_heads(self, fids: Sequence[int]) -> list[ContourHead]:
+        """The per-contour columns of contours by fid, without their rows (in the order given; unknown fids
+        are skipped)."""
+        out: dict[int, ContourHead] = {}
+        con = self._con()
+        for i in range(0, len(fids), 500):
+            chunk = list(fids[i : i + 500])
+            marks = ",".join("?" * len(chunk))
+            sql = f"SELECT fid, elevation, vanish_scale, t_at_scale FROM contours WHERE fid IN ({marks})"
+            for r in con.execute(sql, chunk):
+                vanish = math.inf if r[2] is None else float(r[2])
+                out[r[0]] = ContourHead(r[0], float(r[1]), vanish, _array(r[3]))
+        return [out[f] for f in fids if f in out]
 
     def all_fids(self, dataset: str) -> list[int]:
         """Every contour fid of a dataset, in input order."""

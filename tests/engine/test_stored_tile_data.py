@@ -17,7 +17,7 @@ from engine.io.source import sample_contours_path
 from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import Renderer
 from engine.store.sqlite import STORE_FORMAT, CCSStore
-from engine.tiles.grid import tiles_covering
+from engine.tiles.grid import Tile, buffered, tile_bounds, tiles_covering
 from engine.tiles.significance import row_significance
 from engine.types import Bounds
 
@@ -137,6 +137,21 @@ def test_a_store_of_the_previous_format_is_refused_by_name(tmp_path: Path) -> No
 def sample_tiles(store: CCSStore) -> list[tuple[int, int, int]]:
     bounds = Bounds(*store.dataset("sample").bounds_3857)
     return [tuple(t) for z in (11, 13, 14) for t in tiles_covering(bounds, z)[::5]]  # type: ignore[misc]
+
+
+def test_the_compared_tiles_read_pieces_with_gaps_and_contours_with_no_piece(sample_store: Path) -> None:
+    """The tiles the next tests compare join pieces across gaps and stand in for contours without a piece."""
+    store = CCSStore(sample_store, readonly=True)
+    gaps = stand_ins = multi = 0
+    for kind in ("ccs", "original"):
+        for z, x, y in sample_tiles(store):
+            box = buffered(tile_bounds(Tile(z, x, y)), 64, 4096)
+            pieces = store.pieces_meeting("sample", box, kind)
+            same = pieces.fid[1:] == pieces.fid[:-1]
+            gaps += int((same & (pieces.k[1:] != pieces.k[:-1] + 1)).sum())
+            multi += int((same & (pieces.k[1:] == pieces.k[:-1] + 1)).sum())
+            stand_ins += len(set(store.query("sample", box)) - set(pieces.fid.tolist()))
+    assert gaps > 0 and multi > 0 and stand_ins > 0
 
 
 @pytest.mark.parametrize("method", ["ccsm", "original", "dp"])
