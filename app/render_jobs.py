@@ -222,12 +222,13 @@ def draw_hillshade(worker: Worker, job: HillshadeJob) -> bytes | None:
 
 
 def warm(renderer: Renderer) -> None:
-    """Pack every stored dataset and place its labels now, so that cost (seconds on a large dataset) is paid
-    before the worker takes its first request, not inside one request's deadline."""
+    """Pack every stored dataset and read its labels now (placing them only for a version stored without them),
+    so that cost (seconds on a large dataset) is paid before the worker takes its first request, not inside one
+    request's deadline."""
     for dataset in renderer.store.dataset_ids():
         try:
             renderer.pack(dataset)
-            renderer.labels(dataset)  # label placement runs once per data version: seconds on the sample
+            renderer.labels(dataset)  # the build stored them: read once per data version
         except Exception:  # a dataset that cannot be packed fails in its own requests, with its own error
             log.warning("render worker: could not pack %s ahead of use", dataset, exc_info=True)
 

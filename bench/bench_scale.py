@@ -12,7 +12,8 @@ Series
 ``dense``  one DEM at 20, 10 and 5 m intervals: more lines in the same place.
 ``short``  thousands of small hills: rings of a few dozen vertices, the costliest contours per vertex.
 
-Usage: python bench/bench_scale.py [--sizes 1,4,16] [--workers 2] [--series sample,grid,dense,short]
+Usage: python bench/bench_scale.py [--sizes 1,4,16] [--workers 2] [--series sample,grid,dense,short] [--cache-mb MB]
+       python bench/bench_scale.py --tiles STORE[,STORE...] [--cache-mb MB[,MB...]]   (tile times only)
 (each build runs once; on a loaded 2-core machine 4× takes about ten minutes, 16× far longer)
 """
 
@@ -102,7 +103,7 @@ def datasets(sizes: list[int]) -> list[tuple[str, str, Path, float]]:
     return out
 
 
-def build_one(path: Path, interval: float, workers: int) -> dict[str, float]:
+def build_one(path: Path, interval: float, workers: int, cache_mb: float | None = None) -> dict[str, float]:
     """Build one DEM into a fresh store (this process); the numbers as a dict.
 
     The phases are timed by wrapping the functions that do them (nothing else changes); the peak memory is read
@@ -145,7 +146,7 @@ def build_one(path: Path, interval: float, workers: int) -> dict[str, float]:
     rss_main = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     rss_worker = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
     store.close()
-    p50, p95 = tile_times(store_path)
+    p50, p95 = tile_times(store_path, cache_mb=cache_mb)
     return {
         "contours": info.n_contours,
         "vertices": info.n_vertices,
@@ -162,32 +163,58 @@ def build_one(path: Path, interval: float, workers: int) -> dict[str, float]:
     }
 
 
-def tile_times(store_path: Path, n: int = 120) -> tuple[float, float]:
-    """p50 and p95 of rendering ``n`` distinct z12-z14 tiles of the store, each read cold (new renderer)."""
+def tile_times(store_path: Path, n: int = 120, cache_mb: float | None = None) -> tuple[float, float]:
+    """p50 and p95 of rendering ``n`` distinct z12-z14 tiles of the store (ms of wall time, the first tile
+    included), read by a new renderer with ``cache_mb`` of contour memory (None: the renderer's default)."""
+    times = tile_run(store_path, n, cache_mb)["wall_ms"]
+    return float(np.percentile(times, 50)), float(np.percentile(times, 95))
+
+
+def tile_run(store_path: Path, n: int = 120, cache_mb: float | None = None) -> dict[str, np.ndarray]:
+    """Wall and CPU milliseconds of each of ``n`` distinct z12-z14 tiles of the store's first dataset, in the
+    order rendered by one new renderer (the first tile is the first request of the data version: it pays for
+    what a renderer does once per version, e.g. reading the label anchors)."""
     from engine.serve.renderer import Renderer
     from engine.store.sqlite import CCSStore
     from engine.tiles.grid import tiles_covering
     from engine.types import Bounds
 
     store = CCSStore(store_path, readonly=True)
-    info = store.dataset("bench")
+    dataset = store.dataset_ids()[0]
+    info = store.dataset(dataset)
     tiles = [t for z in (12, 13, 14) for t in tiles_covering(Bounds(*info.bounds_3857), z)]
     rng = np.random.default_rng(0)
     chosen = [tiles[i] for i in rng.choice(len(tiles), size=min(n, len(tiles)), replace=False)]
-    renderer = Renderer(store)
-    renderer.pack("bench")  # the per-dataset pack is loaded once per process, not per tile
-    times = []
+    renderer = Renderer(store) if cache_mb is None else Renderer(store, contour_cache_bytes=int(cache_mb * 2**20))
+    renderer.pack(dataset)  # the per-dataset pack is loaded once per process, not per tile
+    wall, cpu = [], []
     for z, x, y in chosen:
-        t0 = time.perf_counter()
-        renderer.tile("bench", z, x, y)
-        times.append(time.perf_counter() - t0)
-    ms = np.array(times) * 1000
-    return float(np.percentile(ms, 50)), float(np.percentile(ms, 95))
+        t0, c0 = time.perf_counter(), time.process_time()
+        renderer.tile(dataset, z, x, y)
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    return {"wall_ms": np.array(wall) * 1000, "cpu_ms": np.array(cpu) * 1000}
 
 
-def run_child(path: Path, interval: float, workers: int) -> dict[str, float]:
+def print_tile_runs(stores: list[Path], cache_mb: list[float | None]) -> None:
+    """Tile times of existing stores (no build), one line per store: first tile, then p50 / p95 of the
+    others, wall and CPU."""
+    print(f"{'store':28} {'cache MB':>8} {'first s':>8} {'p50 ms':>7} {'p95 ms':>7} {'cpu p50':>7} {'cpu p95':>7}")
+    for path, mb in zip(stores, cache_mb, strict=True):
+        r = tile_run(path, cache_mb=mb)
+        wall, cpu = r["wall_ms"][1:], r["cpu_ms"][1:]
+        print(
+            f"{path.name:28} {'default' if mb is None else f'{mb:g}':>8} {r['wall_ms'][0] / 1000:8.2f} "
+            f"{np.percentile(wall, 50):7.2f} {np.percentile(wall, 95):7.2f} "
+            f"{np.percentile(cpu, 50):7.2f} {np.percentile(cpu, 95):7.2f}",
+            flush=True,
+        )
+
+
+def run_child(path: Path, interval: float, workers: int, cache_mb: float | None) -> dict[str, float]:
+    cache = [] if cache_mb is None else ["--cache-mb", f"{cache_mb:g}"]
     out = subprocess.run(
-        [sys.executable, __file__, "--one", str(path), "--interval", str(interval), "--workers", str(workers)],
+        [sys.executable, __file__, "--one", str(path), "--interval", str(interval), "--workers", str(workers), *cache],
         cwd=REPO,
         env={**os.environ, "PYTHONPATH": str(REPO)},
         capture_output=True,
@@ -202,11 +229,26 @@ def main() -> None:
     parser.add_argument("--sizes", default="1,4,16", help="Multiples of the 1× terrain's vertices.")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--series", default="sample,grid,dense,short", help="Which series to run.")
+    parser.add_argument(
+        "--cache-mb",
+        default="",
+        help="Contour memory of the renderer timing the tiles (MB; default the renderer's); a dataset larger "
+        "than it is packed per tile. With --tiles: one value per store, comma-separated (empty: default).",
+    )
+    parser.add_argument(
+        "--tiles",
+        help="Time the tiles of existing stores (comma-separated paths) instead of building; no build.",
+    )
     parser.add_argument("--one", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--interval", type=float, default=20.0, help=argparse.SUPPRESS)
     args = parser.parse_args()
+    cache_mb = [float(v) if v else None for v in args.cache_mb.split(",")]
     if args.one:
-        print(json.dumps(build_one(args.one, args.interval, args.workers)))
+        print(json.dumps(build_one(args.one, args.interval, args.workers, cache_mb[0])))
+        return
+    if args.tiles:
+        stores = [Path(p) for p in args.tiles.split(",")]
+        print_tile_runs(stores, cache_mb if len(cache_mb) == len(stores) else cache_mb[:1] * len(stores))
         return
     sizes = [int(s) for s in args.sizes.split(",")]
     print(
@@ -225,7 +267,7 @@ def main() -> None:
     for series, label, path, interval in datasets(sizes):
         if series not in wanted:
             continue
-        r = run_child(path, interval, args.workers)
+        r = run_child(path, interval, args.workers, cache_mb[0])
         per_core = r["vertices"] / r["seconds"] / args.workers
         print(
             f"{series:7} {label:11} {r['contours']:8.0f} {r['vertices']:9.0f} {r['seconds']:8.1f} "

@@ -26,6 +26,7 @@ from engine.io.dem import DEM_SUFFIXES
 from engine.io.scratch import ReadScratch
 from engine.io.source import read_source
 from engine.params import BuildParams
+from engine.serve.labels import label_placer
 from engine.serve.records import contour_rows, dataset_meta
 from engine.store.spool import DiskSpool
 from engine.store.sqlite import STORE_FORMAT, CCSStore, DatasetInfo, NewContour
@@ -245,13 +246,18 @@ def save_built(
     build_seconds: float = 0.0,
     only_if_building: bool = False,
 ) -> DatasetInfo:
-    """Write a built set as one dataset version.
+    """Write a built set as one dataset version, with its label anchors (placed for tiles up to the default
+    maximum zoom, :mod:`engine.serve.labels`).
 
     Rows are made and written batch by batch (:data:`SAVE_BATCH` contours) inside the store's one write
     transaction, so the reprojected rows of only one batch are in memory at a time.
     """
-    meta = dataset_meta(built, name=name, source=source, source_hash=digest, params=params, build_seconds=build_seconds)
-    return store.save(dataset, meta, _rows_in_batches(built), only_if_building=only_if_building)
+    meta = dataset_meta(
+        built, name=name, source=source, source_hash=digest, params=params, build_seconds=build_seconds
+    )
+    rows = _rows_in_batches(built)
+    labels = label_placer(store, dataset)
+    return store.save(dataset, meta, rows, only_if_building=only_if_building, labels=labels)
 
 
 #: Contours whose store rows are made at once while a built set is written.

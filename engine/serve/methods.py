@@ -84,6 +84,9 @@ class Method(ABC):
     #: Whether the method's lines never cross where the input's do not, so tiles keep that by snap rounding
     #: (docs/design.md section 4.8); the per-scale baselines make crossings of their own.
     keeps_topology: ClassVar[bool] = True
+    #: Which stored rows the method's tile lines are cut from: ``ccs``, ``original``, or None (from whole decoded
+    #: contours); a tile of a dataset too large to pack whole reads only those (engine.serve.pieces).
+    stored_rows: ClassVar[str | None] = None
 
     def visible(self, pack: DatasetPack, idx: NDArray[np.intp], scale: float) -> NDArray[np.intp]:
         """The contours of ``idx`` drawn at a scale: small rings vanish where the map cannot show them."""
@@ -125,6 +128,7 @@ class ContinuousMethod(Method):
 
     name = "ccsm"
     honours_t = True
+    stored_rows = "ccs"
 
     def tile_lines(
         self, pack: DatasetPack, idx: NDArray[np.intp], ts: NDArray[np.float64], scale: float, ctx: TileContext
@@ -147,6 +151,7 @@ class OriginalMethod(Method):
     """The input contours, unsimplified (every contour at every scale)."""
 
     name = "original"
+    stored_rows = "original"
 
     def visible(self, pack: DatasetPack, idx: NDArray[np.intp], scale: float) -> NDArray[np.intp]:
         """Every contour."""

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,7 +17,6 @@ from numpy.typing import NDArray
 from engine.intervals import is_index
 from engine.store.sqlite import ContourRecord
 from engine.tiles.runs import CHUNK_ROWS, chunk_bounds_packed
-from engine.tiles.significance import row_significance
 
 #: Bytes per stored vertex a dataset pack holds, about (to decide whether a dataset fits the contour memory).
 PACK_BYTES_PER_VERTEX = 120
@@ -85,6 +84,44 @@ class LineSet:
         return int(sum(a.nbytes for a in arrays))
 
 
+class ContourColumns(Protocol):
+    """The per-contour columns a pack holds (a :class:`ContourRecord` or a stored contour's head)."""
+
+    @property
+    def fid(self) -> int:
+        """Feature id."""
+
+    @property
+    def elevation(self) -> float:
+        """Height of the contour."""
+
+    @property
+    def vanish_scale(self) -> float:
+        """Scale denominator from which on the contour is not drawn (inf: never vanishes)."""
+
+    @property
+    def t_at_scale(self) -> NDArray[np.float64]:
+        """t at each scale of the dataset's ladder."""
+
+
+@dataclass(frozen=True)
+class CCSRows:
+    """A contour's CCS rows (or a stretch of them) and their significance: together, and of ``top`` alone."""
+
+    base: NDArray[np.float64]
+    top: NDArray[np.float64]
+    sig: NDArray[np.float32]
+    sig_top: NDArray[np.float32]
+
+
+@dataclass(frozen=True)
+class OriginalRows:
+    """A contour's input rows (or a stretch of them) and their significance."""
+
+    rows: NDArray[np.float64]
+    sig: NDArray[np.float32]
+
+
 @dataclass(frozen=True)
 class DatasetPack:
     """Contours of one dataset version (in fid order) in a few big arrays.
@@ -105,28 +142,55 @@ class DatasetPack:
     @classmethod
     def of(cls, data_version: int, recs: Sequence[ContourRecord], interval: float | None) -> DatasetPack:
         """Pack decoded contour rows (in fid order)."""
+        ccs = [CCSRows(r.base, r.top, r.sig, r.sig_top) for r in recs]
+        original = [OriginalRows(r.original, r.sig_original) for r in recs]
+        return cls.of_rows(data_version, recs, ccs, original, interval)
+
+    @classmethod
+    def of_rows(
+        cls,
+        data_version: int,
+        heads: Sequence[ContourColumns],
+        ccs: Sequence[CCSRows],
+        original: Sequence[OriginalRows],
+        interval: float | None,
+    ) -> DatasetPack:
+        """Pack contours (in fid order) from their columns and rows (whole, or the stretch a tile meets)."""
         z2 = np.zeros((0, 2))
-        base = np.ascontiguousarray(np.concatenate([r.base for r in recs])) if recs else z2
-        top = np.ascontiguousarray(np.concatenate([r.top for r in recs])) if recs else z2
-        original = np.ascontiguousarray(np.concatenate([r.original for r in recs])) if recs else z2
+        base = np.ascontiguousarray(np.concatenate([c.base for c in ccs])) if ccs else z2
+        top = np.ascontiguousarray(np.concatenate([c.top for c in ccs])) if ccs else z2
+        orig = np.ascontiguousarray(np.concatenate([o.rows for o in original])) if original else z2
         ccs_sig = np.zeros((0, 2), np.float32)
         orig_sig = np.zeros(0, np.float32)
-        if recs:
-            ccs_sig = np.column_stack(
-                [np.concatenate([r.sig for r in recs]), np.concatenate([row_significance(r.top) for r in recs])]
-            ).astype(np.float32)
-            orig_sig = np.concatenate([r.sig_original for r in recs]).astype(np.float32)
-        elevation = np.array([float(r.elevation) for r in recs])
+        if ccs:
+            sig = np.concatenate([c.sig for c in ccs])
+            ccs_sig = np.column_stack([sig, np.concatenate([c.sig_top for c in ccs])]).astype(np.float32)
+            orig_sig = np.concatenate([o.sig for o in original]).astype(np.float32)
+        ccs_lines = LineSet.of(base, top, [len(c.base) for c in ccs], ccs_sig)
+        original_lines = LineSet.of(orig, orig, [len(o.rows) for o in original], orig_sig)
+        return cls.of_lines(data_version, heads, ccs_lines, original_lines, interval)
+
+    @classmethod
+    def of_lines(
+        cls,
+        data_version: int,
+        heads: Sequence[ContourColumns],
+        ccs: LineSet,
+        original: LineSet,
+        interval: float | None,
+    ) -> DatasetPack:
+        """Pack contours (in fid order) from their columns and their two line sets (one line per contour)."""
+        elevation = np.array([float(h.elevation) for h in heads])
         index_of = {e: is_index(e, interval) for e in set(elevation.tolist())}
         return cls(
             data_version,
-            np.array([r.fid for r in recs], dtype=np.int64),
-            np.array([r.vanish_scale for r in recs], dtype=np.float64),
+            np.array([h.fid for h in heads], dtype=np.int64),
+            np.array([h.vanish_scale for h in heads], dtype=np.float64),
             elevation,
             np.array([index_of[e] for e in elevation.tolist()], dtype=bool),
-            np.stack([r.t_at_scale for r in recs]) if recs else np.zeros((0, 1)),
-            LineSet.of(base, top, [len(r.base) for r in recs], ccs_sig),
-            LineSet.of(original, original, [len(r.original) for r in recs], orig_sig),
+            np.stack([h.t_at_scale for h in heads]) if heads else np.zeros((0, 1)),
+            ccs,
+            original,
         )
 
     @property

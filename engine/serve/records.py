@@ -71,6 +71,7 @@ def contour_rows(surfaces: Sequence[CCS], working_crs: str, contours: Sequence[C
                 sim_t=ccs.sim_t,
                 sim=ccs.sim,
                 sig=row_significance(base, top),
+                sig_top=row_significance(top),
                 sig_original=row_significance(original),
                 box=(float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])),
             )

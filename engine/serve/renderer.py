@@ -7,7 +7,8 @@ quantise and drop repeats in one compiled pass -> clip the runs that cross the b
 
 Every method goes through this one pipeline. A dataset that fits the contour memory is held as one
 :class:`~engine.serve.pack.DatasetPack` (built once per data version); a larger one is packed per request
-from the contours the tile touches, through an LRU cache of decoded rows (the same tiles, more work each).
+from the stretches of the touched contours' rows that meet the tile, read from their stored pieces
+(:mod:`engine.serve.pieces`; the same tiles, about the same work).
 """
 
 from __future__ import annotations
@@ -20,14 +21,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from engine.cartography.dataset import DatasetCartography, dataset_cartography, label_columns, label_sources
-from engine.cartography.labels import LabelAnchors, place_labels
+from engine.cartography.dataset import DatasetCartography, dataset_cartography, label_columns
+from engine.cartography.labels import LabelAnchors
 from engine.ccsm.regression import t_at_scales
 from engine.checks import check_method, check_t
 from engine.intervals import infer_interval
 from engine.serve.cache import LRUCache
+from engine.serve.labels import DEFAULT_MAX_ZOOM, label_anchors, label_last_zoom, place_dataset_labels
 from engine.serve.methods import Method, TileContext, TileLines, make_methods
 from engine.serve.pack import PACK_BYTES_PER_VERTEX, DatasetPack
+from engine.serve.pieces import pack_of_pieces
 from engine.store.sqlite import CCSStore, ContourRecord, DatasetInfo
 from engine.tiles.clip import clip_lines_exact, clip_lines_fast
 from engine.tiles.crossings import lines_cross_in_grid
@@ -49,8 +52,6 @@ MORPH_START_LAYER = "contours"
 MORPH_END_LAYER = "contours_end"
 #: The point layer of contour labels in tiles and morph tiles (docs/design.md section 9.3).
 LABEL_LAYER = "contour_labels"
-#: Contours read from the store at a time while label anchors are placed.
-LABEL_BATCH = 512
 
 
 @dataclass(frozen=True)
@@ -62,7 +63,7 @@ class TileOptions:
     buffer_px: int = 64
     layer: str = "contours"
     min_zoom: int = 0
-    max_zoom: int = 16
+    max_zoom: int = DEFAULT_MAX_ZOOM
     snap_rounding: bool = True
 
 
@@ -192,8 +193,11 @@ class Renderer:
             out = [r if r is not None else loaded.get(f) for f, r in zip(fids, out, strict=True)]
         return [r for r in out if r is not None]
 
-    def packed(self, dataset: str, fids: Sequence[int]) -> tuple[DatasetPack, NDArray[np.intp]]:
-        """A pack holding ``fids`` and their positions in it: the dataset's pack, or one of just these rows."""
+    def packed(
+        self, dataset: str, fids: Sequence[int], box: Bounds, rows: str | None
+    ) -> tuple[DatasetPack, NDArray[np.intp]]:
+        """A pack holding ``fids`` and their positions in it: the dataset's pack, or one of just the pieces of
+        these contours' ``rows`` (``ccs``, ``original`` or None) that meet ``box`` (:mod:`engine.serve.pieces`)."""
         pack = self.pack(dataset)
         where = pack.locate(fids) if pack is not None else None
         if pack is not None and where is None:  # the store changed under the pack: take the new version
@@ -203,27 +207,33 @@ class Renderer:
         if pack is not None and where is not None:
             return pack, where
         info, interval = self.info(dataset)
-        recs = self.records(fids)
-        return DatasetPack.of(info.data_version, recs, interval), np.arange(len(recs))
+        part = pack_of_pieces(self.store, dataset, fids, box, info.data_version, interval, rows)
+        return part, np.arange(len(part.fid))
 
     def labels(self, dataset: str) -> LabelAnchors:
-        """The dataset's label anchors on index contours, placed once per data version (docs/design.md
-        section 9.3)."""
+        """The dataset's label anchors on index contours (docs/design.md section 9.3): those the build stored
+        with the data version, read once per version.
+
+        A version stored without them, or placed for another served zoom range, has them placed here instead,
+        once per data version (a minute or more for a large dataset).
+        """
         info, _ = self.info(dataset)
         cached = self._labels.get(dataset)
         if cached is not None and cached[0] == info.data_version:
             return cached[1]
-        carto = self.cartography(dataset)
+        last_zoom = label_last_zoom(self.options.max_zoom)
+        stored = self.store.labels(dataset)
+        if stored is not None and stored.data_version == info.data_version and stored.last_zoom == last_zoom:
+            anchors = label_anchors(stored)
+            self._labels[dataset] = (stored.data_version, anchors)
+            return anchors
         with self._labels_lock:
             cached = self._labels.get(dataset)
             if cached is not None and cached[0] == info.data_version:
                 return cached[1]
-            fids = self.store.all_fids(dataset)
-            sources = []
-            for k in range(0, len(fids), LABEL_BATCH):
-                sources.extend(label_sources(carto, self.store.load(fids[k : k + LABEL_BATCH])))
-            anchors = place_labels(sources, info.ladder, carto.latitude, float(self.options.max_zoom) + 1)
-            self._labels[dataset] = (info.data_version, anchors)
+            placed = place_dataset_labels(self.store, dataset, self.options.max_zoom)
+            anchors = label_anchors(placed)
+            self._labels[dataset] = (placed.data_version, anchors)
         return anchors
 
     def label_layer(self, dataset: str, tile: Tile) -> bytes:
@@ -307,7 +317,7 @@ class Renderer:
         fids = self.store.query(dataset, box)
         if not fids:
             return TileResult(None, 0, zoomf, scale)
-        pack, where = self.packed(dataset, fids)
+        pack, where = self.packed(dataset, fids, box, how.stored_rows)
         carto = self.cartography(dataset)
         idx = how.visible(pack, where, scale)
         idx = idx[carto.shown_in_tile(pack.elevation[idx], z)]
@@ -349,7 +359,7 @@ class Renderer:
         fids = self.store.query(dataset, box)
         if not fids:
             return TileResult(None, 0, float(z), float(scales[0]))
-        pack, where = self.packed(dataset, fids)
+        pack, where = self.packed(dataset, fids, box, "ccs")
         carto = self.cartography(dataset)
         idx = where[scales[-1] < pack.vanish[where]]  # drawn somewhere in the level: at its finest end
         idx = idx[carto.shown_in_tile(pack.elevation[idx], z)]

@@ -35,7 +35,11 @@ from engine.scratch import host_name, pid_alive
 from engine.types import Coords
 
 #: Bumped whenever the layout of the file changes; a store of another format is refused.
-STORE_FORMAT = 2
+STORE_FORMAT = 3
+#: Rows of a stored piece of a contour's rows (piece k holds rows k * PIECE_ROWS to (k + 1) * PIECE_ROWS, both
+#: included): a tile of a dataset too large to hold in memory reads only the pieces it meets. A multiple of the
+#: tiles' chunk rows (engine.serve.pieces checks it), so a piece's chunks are the whole line's.
+PIECE_ROWS = 256
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS store_meta(key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -60,6 +64,8 @@ CREATE TABLE IF NOT EXISTS datasets(
     ladder BLOB NOT NULL,
     bad_features TEXT NOT NULL
 );
+-- The small per-contour columns come before the rows: reading them (a tile's contour heads) does not walk
+-- the rows' overflow pages.
 CREATE TABLE IF NOT EXISTS contours(
     fid INTEGER PRIMARY KEY AUTOINCREMENT,
     dataset TEXT NOT NULL,
@@ -71,17 +77,52 @@ CREATE TABLE IF NOT EXISTS contours(
     length_m REAL NOT NULL,
     n_rows INTEGER NOT NULL,
     n_input INTEGER NOT NULL,
+    t_at_scale BLOB NOT NULL,
+    sim_t BLOB NOT NULL,
+    sim BLOB NOT NULL,
     base BLOB NOT NULL,
     top BLOB NOT NULL,
     original BLOB NOT NULL,
     original_w BLOB NOT NULL,
-    t_at_scale BLOB NOT NULL,
-    sim_t BLOB NOT NULL,
-    sim BLOB NOT NULL,
     sig BLOB NOT NULL,
+    sig_top BLOB NOT NULL,
     sig_original BLOB NOT NULL
 );
 CREATE INDEX IF NOT EXISTS contours_dataset ON contours(dataset);
+CREATE TABLE IF NOT EXISTS ccs_pieces(
+    piece INTEGER PRIMARY KEY,
+    fid INTEGER NOT NULL,
+    k INTEGER NOT NULL,
+    base BLOB NOT NULL,
+    top BLOB NOT NULL,
+    sig BLOB NOT NULL,
+    sig_top BLOB NOT NULL
+);
+CREATE INDEX IF NOT EXISTS ccs_pieces_fid ON ccs_pieces(fid);
+CREATE VIRTUAL TABLE IF NOT EXISTS ccs_piece_rtree USING rtree(piece, minx, maxx, miny, maxy, +dataset TEXT);
+CREATE TABLE IF NOT EXISTS original_pieces(
+    piece INTEGER PRIMARY KEY,
+    fid INTEGER NOT NULL,
+    k INTEGER NOT NULL,
+    original BLOB NOT NULL,
+    sig_original BLOB NOT NULL
+);
+CREATE INDEX IF NOT EXISTS original_pieces_fid ON original_pieces(fid);
+CREATE VIRTUAL TABLE IF NOT EXISTS original_piece_rtree USING rtree(piece, minx, maxx, miny, maxy, +dataset TEXT);
+CREATE TABLE IF NOT EXISTS labels(
+    dataset TEXT PRIMARY KEY,
+    data_version INTEGER NOT NULL,
+    last_zoom REAL NOT NULL,
+    n INTEGER NOT NULL,
+    xy BLOB NOT NULL,
+    angle BLOB NOT NULL,
+    min_zoom BLOB NOT NULL,
+    fid BLOB NOT NULL,
+    rank BLOB NOT NULL,
+    elevation BLOB NOT NULL,
+    text TEXT NOT NULL,
+    box_px BLOB NOT NULL
+);
 CREATE VIRTUAL TABLE IF NOT EXISTS contour_rtree USING rtree(fid, minx, maxx, miny, maxy, +dataset TEXT);
 CREATE TABLE IF NOT EXISTS builds(
     dataset TEXT PRIMARY KEY,
@@ -150,9 +191,10 @@ class ContourRecord:
         (S,) t at each scale of the dataset's ladder.
     sim_t, sim
         The Sim(t) table.
-    sig, sig_original
-        (M,) and (n,) float32 significance of each row of base/top and of the original, EPSG:3857 metres
-        (:mod:`engine.tiles.significance`): a tile whose grid unit is u skips rows below u / 2.
+    sig, sig_top, sig_original
+        (M,), (M,) and (n,) float32 significance of each row of base/top together, of top alone (for a contour
+        drawn at t = 1) and of the original, EPSG:3857 metres (:mod:`engine.tiles.significance`): a tile whose
+        grid unit is u skips rows below u / 2.
     """
 
     fid: int
@@ -171,12 +213,41 @@ class ContourRecord:
     sim_t: NDArray[np.float64]
     sim: NDArray[np.float64]
     sig: NDArray[np.float32]
+    sig_top: NDArray[np.float32]
     sig_original: NDArray[np.float32]
 
     @property
     def nbytes(self) -> int:
         """Memory held by the arrays."""
         return int(self.base.nbytes + self.top.nbytes + self.original.nbytes + self.original_w.nbytes)
+
+
+@dataclass(frozen=True)
+class ContourHead:
+    """The per-contour columns of a stored contour without its rows (see :class:`ContourRecord`)."""
+
+    fid: int
+    elevation: float
+    vanish_scale: float
+    t_at_scale: NDArray[np.float64]
+
+
+#: The kinds of stored pieces: of the CCS rows (columns base, top, sig, sig_top) and of the original (columns
+#: original, sig_original).
+PIECE_KINDS = {"ccs": ("base", "top", "sig", "sig_top"), "original": ("original", "sig_original")}
+
+
+@dataclass(frozen=True)
+class StoredPieces:
+    """Pieces of one kind of some contours' rows, concatenated: piece ``i`` is piece ``k[i]`` of contour
+    ``fid[i]`` and holds ``n[i]`` rows of each column (:data:`PIECE_KINDS`); piece k holds rows
+    ``k * PIECE_ROWS`` to ``(k + 1) * PIECE_ROWS`` of its contour, both included (consecutive pieces share a row).
+    """
+
+    fid: NDArray[np.int64]
+    k: NDArray[np.int64]
+    n: NDArray[np.int64]
+    columns: tuple[NDArray[Any], ...]
 
 
 @dataclass(frozen=True)
@@ -217,8 +288,35 @@ class NewContour:
     sim_t: NDArray[np.float64]
     sim: NDArray[np.float64]
     sig: NDArray[np.float32]
+    sig_top: NDArray[np.float32]
     sig_original: NDArray[np.float32]
     box: tuple[float, float, float, float]
+
+
+@dataclass(frozen=True)
+class StoredLabels:
+    """A dataset version's label anchors as stored (the arrays of
+    :class:`engine.cartography.labels.LabelAnchors`), placed for zooms up to ``last_zoom``.
+
+    Written with the contour rows (their fids are only known inside the write transaction), so a tile never
+    places labels itself.
+    """
+
+    data_version: int
+    last_zoom: float
+    xy: NDArray[np.float64]
+    angle: NDArray[np.float64]
+    min_zoom: NDArray[np.float64]
+    fid: NDArray[np.int64]
+    rank: NDArray[np.int64]
+    elevation: NDArray[np.float64]
+    text: list[str]
+    box_px: NDArray[np.float64]
+
+
+#: Places a dataset's labels once its rows and metadata are written: called inside the write transaction on
+#: the writing thread, whose reads (``dataset``, ``load``, ...) see the new version before it is committed.
+LabelPlacer = Callable[[], StoredLabels]
 
 
 @dataclass(frozen=True)
@@ -248,6 +346,11 @@ def _array(b: bytes, cols: int = 0) -> NDArray[np.float64]:
     return a.reshape(-1, cols) if cols else a
 
 
+def _column(name: str, blob: bytes) -> NDArray[Any]:
+    """A stored piece's column: float32 significance, else (n, 2) float64 rows."""
+    return np.frombuffer(blob, dtype="<f4") if name.startswith("sig") else _array(blob, 2)
+
+
 def _contour_row(dataset: str, c: NewContour) -> tuple[Any, ...]:
     return (
         dataset,
@@ -267,8 +370,42 @@ def _contour_row(dataset: str, c: NewContour) -> tuple[Any, ...]:
         _blob(c.sim_t),
         _blob(c.sim),
         np.asarray(c.sig, dtype="<f4").tobytes(),
+        np.asarray(c.sig_top, dtype="<f4").tobytes(),
         np.asarray(c.sig_original, dtype="<f4").tobytes(),
     )
+
+
+def piece_rows(n: int, k: int) -> slice:
+    """The rows of piece ``k`` of ``n`` rows (empty beyond the last piece)."""
+    lo = k * PIECE_ROWS
+    if k and lo >= n - 1:
+        return slice(0, 0)
+    return slice(lo, min(lo + PIECE_ROWS, n - 1) + 1)
+
+
+def piece_count(n: int) -> int:
+    """Pieces of ``n`` rows (one at least)."""
+    return max(1, -(-(n - 1) // PIECE_ROWS))
+
+
+def _pieces(c: NewContour) -> Iterator[tuple[str, int, list[bytes], tuple[float, float, float, float]]]:
+    """The stored pieces of a contour: kind, k, the columns' bytes, and the box (minx, maxx, miny, maxy) of its
+    rows."""
+    f4 = "<f4"
+    for k in range(piece_count(len(c.base))):
+        s = piece_rows(len(c.base), k)
+        xy = np.concatenate([c.base[s], c.top[s]])
+        sig = [np.asarray(c.sig[s], dtype=f4).tobytes(), np.asarray(c.sig_top[s], dtype=f4).tobytes()]
+        yield "ccs", k, [_blob(c.base[s]), _blob(c.top[s]), *sig], _box(xy)
+    for k in range(piece_count(len(c.original))):
+        s = piece_rows(len(c.original), k)
+        sig_original = np.asarray(c.sig_original[s], dtype=f4).tobytes()
+        yield "original", k, [_blob(c.original[s]), sig_original], _box(c.original[s])
+
+
+def _box(xy: NDArray[np.float64]) -> tuple[float, float, float, float]:
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
 
 
 #: SQLite's messages for a write the file system refuses (full disk, read-only mount or file, I/O error).
@@ -478,6 +615,7 @@ class CCSStore:
         progress: Callable[[int, int], None] | None = None,
         *,
         only_if_building: bool = False,
+        labels: LabelPlacer | None = None,
     ) -> DatasetInfo:
         """Write a dataset, replacing any previous version, in one transaction.
 
@@ -486,7 +624,9 @@ class CCSStore:
         counts, goes in last). An exception (or a killed process) before COMMIT leaves the previous version
         untouched. With ``only_if_building`` the write happens only while the dataset's build is still
         recorded (checked inside the transaction), so a dataset deleted during its build never comes back:
-        BuildCancelled is raised instead. ``progress`` gets (rows written, rows known so far).
+        BuildCancelled is raised instead. ``progress`` gets (rows written, rows known so far). ``labels``, when
+        given, is called after the rows and the dataset's row are in, and its anchors are written in the same
+        transaction (with the new ``data_version``).
         """
         with self._write() as cur:
             if only_if_building and not self._is_building(cur, dataset):
@@ -498,10 +638,15 @@ class CCSStore:
                 cur.execute(
                     "INSERT INTO contours(dataset, contour_id, elevation, closed, grp, vanish_scale, "
                     "length_m, n_rows, n_input, base, top, original, original_w, t_at_scale, sim_t, sim, sig, "
-                    "sig_original) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                    "sig_top, sig_original) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                     _contour_row(dataset, c),
                 )
-                cur.execute("INSERT INTO contour_rtree VALUES (?,?,?,?,?,?)", (cur.lastrowid, *c.box, dataset))
+                fid = cur.lastrowid
+                cur.execute("INSERT INTO contour_rtree VALUES (?,?,?,?,?,?)", (fid, *c.box, dataset))
+                for kind, k, blobs, box in _pieces(c):
+                    marks = ",".join("?" * len(blobs))
+                    cur.execute(f"INSERT INTO {kind}_pieces VALUES (NULL,?,?,{marks})", (fid, k, *blobs))
+                    cur.execute(f"INSERT INTO {kind}_piece_rtree VALUES (?,?,?,?,?,?)", (cur.lastrowid, *box, dataset))
                 counts.add(c)
                 if progress and counts.n % step == 0:
                     progress(counts.n, counts.n)
@@ -533,15 +678,61 @@ class CCSStore:
                     json.dumps(meta.bad_features),
                 ),
             )
+            if labels is not None:
+                self._insert_labels(cur, dataset, counter, labels())
             cur.execute("DELETE FROM builds WHERE dataset=?", (dataset,))
         return self.dataset(dataset)
+
+    @staticmethod
+    def _insert_labels(cur: sqlite3.Cursor, dataset: str, data_version: int, labels: StoredLabels) -> None:
+        cur.execute(
+            "INSERT INTO labels VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
+            (
+                dataset,
+                data_version,
+                float(labels.last_zoom),
+                len(labels.fid),
+                _blob(labels.xy),
+                _blob(labels.angle),
+                _blob(labels.min_zoom),
+                np.asarray(labels.fid, dtype="<i8").tobytes(),
+                np.asarray(labels.rank, dtype="<i8").tobytes(),
+                _blob(labels.elevation),
+                json.dumps(list(labels.text)),
+                _blob(labels.box_px),
+            ),
+        )
+
+    def labels(self, dataset: str) -> StoredLabels | None:
+        """The label anchors stored with the dataset's current version, or None (none were placed at build)."""
+        columns = "data_version, last_zoom, xy, angle, min_zoom, fid, rank, elevation, text, box_px"
+        row = self._con().execute(f"SELECT {columns} FROM labels WHERE dataset=?", (dataset,)).fetchone()
+        if row is None:
+            return None
+        return StoredLabels(
+            data_version=int(row[0]),
+            last_zoom=float(row[1]),
+            xy=_array(row[2], 2),
+            angle=_array(row[3]),
+            min_zoom=_array(row[4]),
+            fid=np.frombuffer(row[5], dtype="<i8"),
+            rank=np.frombuffer(row[6], dtype="<i8"),
+            elevation=_array(row[7]),
+            text=list(json.loads(row[8])),
+            box_px=_array(row[9], 2),
+        )
 
     @staticmethod
     def _delete_rows(cur: sqlite3.Cursor, dataset: str) -> None:
         cur.execute(
             "DELETE FROM contour_rtree WHERE fid IN (SELECT fid FROM contours WHERE dataset=?)", (dataset,)
         )
+        for kind in PIECE_KINDS:
+            pieces = f"SELECT piece FROM {kind}_pieces WHERE fid IN (SELECT fid FROM contours WHERE dataset=?)"
+            cur.execute(f"DELETE FROM {kind}_piece_rtree WHERE piece IN ({pieces})", (dataset,))
+            cur.execute(f"DELETE FROM {kind}_pieces WHERE piece IN ({pieces})", (dataset,))
         cur.execute("DELETE FROM contours WHERE dataset=?", (dataset,))
+        cur.execute("DELETE FROM labels WHERE dataset=?", (dataset,))
         cur.execute("DELETE FROM datasets WHERE id=?", (dataset,))
 
     def delete(self, dataset: str) -> bool:
@@ -633,6 +824,37 @@ class CCSStore:
         )
         return list(chain.from_iterable(cur))
 
+    def pieces_meeting(self, dataset: str, bounds_3857: Sequence[float], kind: str) -> StoredPieces:
+        """The dataset's pieces of one kind (``ccs`` or ``original``) whose rows' extent meets an EPSG:3857
+        rectangle, sorted by fid and k."""
+        minx, miny, maxx, maxy = (float(v) for v in bounds_3857)
+        names = PIECE_KINDS[kind]
+        columns = ", ".join(f"p.{c}" for c in names)
+        rows = self._con().execute(
+            f"SELECT p.fid, p.k, {columns} FROM {kind}_piece_rtree r JOIN {kind}_pieces p ON p.piece = r.piece "
+            "WHERE r.maxx >= ? AND r.minx <= ? AND r.maxy >= ? AND r.miny <= ? AND r.dataset = ? ORDER BY p.fid, p.k",
+            (minx, maxx, miny, maxy, dataset),
+        ).fetchall()
+        fid = np.array([r[0] for r in rows], dtype=np.int64)
+        k = np.array([r[1] for r in rows], dtype=np.int64)
+        n = np.array([len(r[2]) // 16 for r in rows], dtype=np.int64)  # the first column holds (x, y) float64
+        arrays = tuple(_column(name, b"".join([r[2 + j] for r in rows])) for j, name in enumerate(names))
+        return StoredPieces(fid, k, n, arrays)
+
+    def load_heads(self, fids: Sequence[int]) -> list[ContourHead]:
+        """The per-contour columns of contours by fid, without their rows (in the order given; unknown fids
+        are skipped)."""
+        out: dict[int, ContourHead] = {}
+        con = self._con()
+        for i in range(0, len(fids), 500):
+            chunk = list(fids[i : i + 500])
+            marks = ",".join("?" * len(chunk))
+            sql = f"SELECT fid, elevation, vanish_scale, t_at_scale FROM contours WHERE fid IN ({marks})"
+            for r in con.execute(sql, chunk):
+                vanish = math.inf if r[2] is None else float(r[2])
+                out[r[0]] = ContourHead(r[0], float(r[1]), vanish, _array(r[3]))
+        return [out[f] for f in fids if f in out]
+
     def all_fids(self, dataset: str) -> list[int]:
         """Every contour fid of a dataset, in input order."""
         return [
@@ -654,7 +876,7 @@ class CCSStore:
             marks = ",".join("?" * len(chunk))
             for r in con.execute(
                 "SELECT fid, dataset, contour_id, elevation, closed, grp, vanish_scale, length_m, base, top, "
-                f"original, original_w, t_at_scale, sim_t, sim, sig, sig_original FROM contours "
+                f"original, original_w, t_at_scale, sim_t, sim, sig, sig_top, sig_original FROM contours "
                 f"WHERE fid IN ({marks})",
                 chunk,
             ):
@@ -675,7 +897,8 @@ class CCSStore:
                     sim_t=_array(r[13]),
                     sim=_array(r[14]),
                     sig=np.frombuffer(r[15], dtype="<f4"),
-                    sig_original=np.frombuffer(r[16], dtype="<f4"),
+                    sig_top=np.frombuffer(r[16], dtype="<f4"),
+                    sig_original=np.frombuffer(r[17], dtype="<f4"),
                 )
         return [out[f] for f in fids if f in out]
 

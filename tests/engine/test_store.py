@@ -123,7 +123,7 @@ def test_packed_tiles_equal_contour_by_contour(store):
     from engine.types import Bounds
 
     packed = Renderer(store)
-    by_contour = Renderer(store, contour_cache_bytes=1)  # too small for a pack: the LRU path
+    by_contour = Renderer(store, contour_cache_bytes=1)  # too small for a pack: packed per tile from pieces
     assert by_contour.pack("h") is None and packed.pack("h") is not None
     info = store.dataset("h")
     n = 0

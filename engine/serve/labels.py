@@ -1,0 +1,81 @@
+"""A dataset version's label anchors: placed from its stored contours when the build writes them, and stored
+with the version (docs/design.md section 9.3).
+
+Placing the labels of a large dataset takes a minute or more; it depends only on the stored contours, their
+metadata and the last zoom served, so the build does it once (inside the store's write transaction, where the
+new rows' fids are known) and a tile only reads the result.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from engine.cartography.dataset import dataset_cartography, label_sources
+from engine.cartography.labels import LabelAnchors, place_labels
+from engine.intervals import infer_interval
+from engine.store.sqlite import CCSStore, LabelPlacer, StoredLabels
+
+#: The largest tile zoom served unless configured otherwise; builds place labels for it.
+DEFAULT_MAX_ZOOM = 16
+#: Contours read from the store at a time while label anchors are placed.
+LABEL_BATCH = 512
+
+
+def label_last_zoom(max_zoom: int) -> float:
+    """The last zoom labels are checked at for a served maximum zoom: through the whole last level."""
+    return float(max_zoom) + 1
+
+
+def place_dataset_labels(store: CCSStore, dataset: str, max_zoom: int) -> StoredLabels:
+    """Place the labels of the dataset's version as the store holds it, for tiles up to ``max_zoom``.
+
+    Raises
+    ------
+    UnknownLayer
+        The dataset is not stored.
+    """
+    info = store.dataset(dataset)
+    elevations = store.elevations(dataset)
+    carto = dataset_cartography(info, info.interval or infer_interval(elevations), elevations)
+    fids = store.all_fids(dataset)
+    sources = []
+    for k in range(0, len(fids), LABEL_BATCH):
+        sources.extend(label_sources(carto, store.load(fids[k : k + LABEL_BATCH])))
+    last_zoom = label_last_zoom(max_zoom)
+    anchors = place_labels(sources, info.ladder, carto.latitude, last_zoom)
+    return stored_labels(anchors, info.data_version, last_zoom)
+
+
+def label_placer(store: CCSStore, dataset: str, max_zoom: int = DEFAULT_MAX_ZOOM) -> LabelPlacer:
+    """What :meth:`CCSStore.save` calls to place the labels of the version it writes."""
+    return lambda: place_dataset_labels(store, dataset, max_zoom)
+
+
+def stored_labels(anchors: LabelAnchors, data_version: int, last_zoom: float) -> StoredLabels:
+    """Anchors as the store keeps them."""
+    return StoredLabels(
+        data_version=data_version,
+        last_zoom=last_zoom,
+        xy=anchors.xy,
+        angle=anchors.angle,
+        min_zoom=anchors.min_zoom,
+        fid=anchors.fid,
+        rank=anchors.rank,
+        elevation=anchors.elevation,
+        text=list(anchors.text),
+        box_px=anchors.box_px,
+    )
+
+
+def label_anchors(stored: StoredLabels) -> LabelAnchors:
+    """Stored anchors as the renderer uses them."""
+    return LabelAnchors(
+        np.asarray(stored.xy, dtype=np.float64),
+        np.asarray(stored.angle, dtype=np.float64),
+        np.asarray(stored.min_zoom, dtype=np.float64),
+        np.asarray(stored.fid, dtype=np.int64),
+        np.asarray(stored.rank, dtype=np.int64),
+        np.asarray(stored.elevation, dtype=np.float64),
+        list(stored.text),
+        np.asarray(stored.box_px, dtype=np.float64),
+    )

@@ -1,0 +1,186 @@
+"""What the build stores so that no tile request recomputes it: the target rows' significance and the label
+anchors; and the tiles of a dataset too large for the renderer's contour memory (packed per tile) are the
+tiles of the same dataset packed whole."""
+
+import sqlite3
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import engine.serve.labels as serve_labels
+from engine.cartography.dataset import dataset_cartography, label_sources
+from engine.cartography.labels import place_labels
+from engine.errors import StoreError
+from engine.intervals import infer_interval
+from engine.io.source import sample_contours_path
+from engine.serve.datasets import SourceSpec, build_dataset
+from engine.serve.renderer import Renderer
+from engine.store.sqlite import STORE_FORMAT, CCSStore
+from engine.tiles.grid import Tile, buffered, tile_bounds, tiles_covering
+from engine.tiles.significance import row_significance
+from engine.types import Bounds
+
+
+@pytest.fixture(scope="module")
+def sample_store(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("stored") / "sample.sqlite"
+    build_dataset(CCSStore(path), SourceSpec(sample_contours_path(), "sample", "sample"), workers=2)
+    return path
+
+
+def test_stored_target_significance_is_the_target_rows_own(sample_store: Path) -> None:
+    store = CCSStore(sample_store, readonly=True)
+    recs = store.load(store.all_fids("sample"))
+    differs = 0
+    for r in recs:
+        assert r.sig_top.dtype == np.float32 and len(r.sig_top) == len(r.top)
+        assert np.array_equal(r.sig_top, row_significance(r.top))
+        differs += int(not np.array_equal(r.sig_top, r.sig))
+    assert differs > len(recs) // 2  # the target's own significance, not that of (base, top) together
+
+
+def placed_by_hand(store: CCSStore, dataset: str, last_zoom: float):  # noqa: ANN201 - LabelAnchors
+    """The labels as the renderer placed them on a tile request before the build stored them."""
+    info = store.dataset(dataset)
+    elevations = store.elevations(dataset)
+    carto = dataset_cartography(info, info.interval or infer_interval(elevations), elevations)
+    sources = label_sources(carto, store.load(store.all_fids(dataset)))
+    return place_labels(sources, info.ladder, carto.latitude, last_zoom)
+
+
+def test_stored_labels_are_those_placed_from_the_stored_contours(sample_store: Path) -> None:
+    store = CCSStore(sample_store, readonly=True)
+    stored = store.labels("sample")
+    assert stored is not None and stored.data_version == store.data_version("sample")
+    expected = placed_by_hand(store, "sample", Renderer(store).options.max_zoom + 1.0)
+    assert len(expected) > 100
+    assert np.array_equal(stored.fid, expected.fid)
+    assert np.array_equal(stored.xy, expected.xy)
+    assert np.array_equal(stored.angle, expected.angle)
+    assert np.array_equal(stored.min_zoom, expected.min_zoom)
+    assert np.array_equal(stored.rank, expected.rank)
+    assert np.array_equal(stored.elevation, expected.elevation)
+    assert np.array_equal(stored.box_px, expected.box_px)
+    assert stored.text == expected.text
+
+
+def count_placements(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    calls: list[int] = []
+    real = serve_labels.place_labels
+
+    def counted(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(serve_labels, "place_labels", counted)
+    return calls
+
+
+def tile_with_labels(renderer: Renderer, store: CCSStore, dataset: str) -> tuple[int, int, int]:
+    """A z14 tile of the dataset whose label layer is not empty."""
+    labels = store.labels(dataset)
+    assert labels is not None and len(labels.fid)
+    for z, x, y in tiles_covering(Bounds(*store.dataset(dataset).bounds_3857), 14):
+        data = renderer.tile(dataset, z, x, y).data
+        if data is not None and b"contour_labels" in data:
+            return z, x, y
+    raise AssertionError("no tile with labels")
+
+
+def test_first_tile_after_a_build_places_no_labels(
+    tmp_path: Path, sample_store: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    calls = count_placements(monkeypatch)
+    store = CCSStore(tmp_path / "fresh.sqlite")
+    build_dataset(store, SourceSpec(sample_contours_path(), "sample", "sample"), workers=2)
+    assert len(calls) == 1  # the build placed them
+    z, x, y = tile_with_labels(Renderer(CCSStore(sample_store, readonly=True)), store, "sample")
+    renderer = Renderer(store)
+    first = renderer.tile("sample", z, x, y)
+    assert first.data is not None and b"contour_labels" in first.data
+    assert len(calls) == 1  # ... and the first tile of a new renderer only read them
+
+
+def test_a_version_stored_without_labels_has_them_placed_on_the_first_tile(
+    tmp_path: Path, sample_store: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    store = CCSStore(sample_store, readonly=True)
+    z, x, y = tile_with_labels(Renderer(store), store, "sample")
+    expected = Renderer(store).tile("sample", z, x, y).data
+    CCSStore(tmp_path / "bare.sqlite").close()
+    con = sqlite3.connect(tmp_path / "bare.sqlite")  # the rows as they are, no labels: a build that placed none
+    con.execute("ATTACH DATABASE ? AS src", (str(sample_store),))
+    for table in ("contours", "contour_rtree", "datasets"):
+        con.execute(f"INSERT INTO {table} SELECT * FROM src.{table}")
+    con.commit()
+    con.close()
+    bare = CCSStore(tmp_path / "bare.sqlite")
+    fids = store.all_fids("sample")
+    assert bare.labels("sample") is None and bare.all_fids("sample") == fids
+    calls = count_placements(monkeypatch)
+    assert Renderer(bare).tile("sample", z, x, y).data == expected
+    assert len(calls) == 1
+
+
+def test_a_store_of_the_previous_format_is_refused_by_name(tmp_path: Path) -> None:
+    path = tmp_path / "old.sqlite"
+    CCSStore(path).close()
+    con = sqlite3.connect(path)
+    con.execute("UPDATE store_meta SET value=? WHERE key='format'", (str(STORE_FORMAT - 1),))
+    con.commit()
+    con.close()
+    with pytest.raises(StoreError, match=f"has format {STORE_FORMAT - 1}, expected {STORE_FORMAT}"):
+        CCSStore(path)
+
+
+def sample_tiles(store: CCSStore) -> list[tuple[int, int, int]]:
+    bounds = Bounds(*store.dataset("sample").bounds_3857)
+    return [tuple(t) for z in (11, 13, 14) for t in tiles_covering(bounds, z)[::5]]  # type: ignore[misc]
+
+
+def test_the_compared_tiles_read_pieces_with_gaps_and_contours_with_no_piece(sample_store: Path) -> None:
+    """The tiles the next tests compare join pieces across gaps and stand in for contours without a piece."""
+    store = CCSStore(sample_store, readonly=True)
+    gaps = stand_ins = multi = 0
+    for kind in ("ccs", "original"):
+        for z, x, y in sample_tiles(store):
+            box = buffered(tile_bounds(Tile(z, x, y)), 64, 4096)
+            pieces = store.pieces_meeting("sample", box, kind)
+            same = pieces.fid[1:] == pieces.fid[:-1]
+            gaps += int((same & (pieces.k[1:] != pieces.k[:-1] + 1)).sum())
+            multi += int((same & (pieces.k[1:] == pieces.k[:-1] + 1)).sum())
+            stand_ins += len(set(store.query("sample", box)) - set(pieces.fid.tolist()))
+    assert gaps > 0 and multi > 0 and stand_ins > 0
+
+
+@pytest.mark.parametrize("method", ["ccsm", "original", "dp"])
+def test_tiles_of_a_dataset_larger_than_the_contour_memory_equal_the_packed_tiles(
+    sample_store: Path, method: str
+) -> None:
+    store = CCSStore(sample_store, readonly=True)
+    packed = Renderer(store)
+    per_tile = Renderer(store, contour_cache_bytes=1 << 20)
+    assert packed.pack("sample") is not None and per_tile.pack("sample") is None
+    tiles = sample_tiles(store)
+    assert len(tiles) > 20
+    drawn = 0
+    for z, x, y in tiles:
+        for zoom in (float(z), z + 0.5):
+            a = packed.tile("sample", z, x, y, zoom=zoom, method=method).data
+            b = per_tile.tile("sample", z, x, y, zoom=zoom, method=method).data
+            assert a == b, (method, z, x, y, zoom)
+            drawn += a is not None
+    assert drawn > 20
+
+
+def test_morph_tiles_of_a_dataset_larger_than_the_contour_memory_equal_the_packed_ones(sample_store: Path) -> None:
+    store = CCSStore(sample_store, readonly=True)
+    packed = Renderer(store)
+    per_tile = Renderer(store, contour_cache_bytes=1 << 20)
+    drawn = 0
+    for z, x, y in sample_tiles(store):
+        a = packed.morph_tile("sample", z, x, y).data
+        assert a == per_tile.morph_tile("sample", z, x, y).data, (z, x, y)
+        drawn += a is not None
+    assert drawn > 20
