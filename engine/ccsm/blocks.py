@@ -4,8 +4,8 @@ contours that can reach them, not against the whole set (docs/design.md section 
 Every surface is cut into pieces of :data:`INDEX_PIECE_SEGMENTS` segments, and each piece has a swept box: the
 box of its rows at t = 0 and t = 1, which holds its slices at every t. A contour belongs to the block of a
 square grid that holds its box centre. A block's *near* stretches are its own contours and, of every other
-contour, the rows from its first to its last piece whose box meets a piece box of an own contour: the only
-rows whose slices can meet the block's contours. Checking each block's own contours against its near
+contour, each run of consecutive pieces whose boxes meet a piece box of an own contour: the only rows whose
+slices can meet the block's contours. Checking each block's own contours against its near
 stretches therefore finds exactly the meeting pairs a check of the whole set finds (each pair at least once,
 from the block of either contour), so the repair's decisions do not change. The piece boxes stay in memory
 (a few numbers per 16 rows); a block's surfaces are read from the spool only when its check is sent, so
@@ -147,9 +147,10 @@ class Block:
     own
         (k,) indices of the contours whose box centre lies in the cell.
     near
-        (m,) sorted indices of ``own`` and of every contour with a piece whose box meets a piece box of an own one.
+        (m,) sorted indices of ``own`` and of every contour with a piece whose box meets a piece box of an own
+        one, once per stretch (a contour may come near in several places).
     first, last
-        (m,) the rows of each near contour to check: first to last (inclusive); -1 for the whole contour.
+        (m,) the rows of each near stretch to check: first to last (inclusive); -1 for a whole own contour.
     """
 
     own: NDArray[np.intp]
@@ -265,14 +266,18 @@ def _block(
     last: NDArray[np.integer],
     owner: NDArray[np.integer],
 ) -> Block:
-    """A block from its own contours and the pieces that meet theirs: each other contour's stretch is the rows
-    from its first to its last piece met."""
-    hit = np.unique(hit)
+    """A block from its own contours and the pieces that meet theirs: each other contour's stretches are its
+    runs of consecutive pieces met (a long contour that winds in and out of the block's reach is checked only
+    where it comes near, not from its first piece met to its last)."""
+    hit = np.unique(hit)  # pieces are in owner order, and in order along each owner
     others = hit[~np.isin(owner[hit], own)]
-    by_owner = others[np.argsort(owner[others], kind="stable")]
-    owners, begin = np.unique(owner[by_owner], return_index=True)
-    rows_from = np.minimum.reduceat(first[by_owner], begin) if len(begin) else np.zeros(0, dtype=np.intp)
-    rows_to = np.maximum.reduceat(last[by_owner], begin) if len(begin) else np.zeros(0, dtype=np.intp)
+    if len(others):
+        breaks = np.flatnonzero((np.diff(others) != 1) | (np.diff(owner[others]) != 0)) + 1
+        run_start = others[np.concatenate([[0], breaks])]
+        run_end = others[np.concatenate([breaks, [len(others)]]) - 1]
+        owners, rows_from, rows_to = owner[run_start], first[run_start], last[run_end]
+    else:
+        owners = rows_from = rows_to = np.zeros(0, dtype=np.intp)
     near = np.concatenate([own, owners]).astype(np.intp)
     order = np.argsort(near, kind="stable")
     whole = np.full(len(own), -1, dtype=np.intp)
@@ -395,7 +400,7 @@ def find_crossings_by_block(
     checks = map_ordered(executor, block_contacts, tasks, weight=_task_bytes, budget=BLOCK_TASK_BUDGET_BYTES)
     for block, pairs in zip(blocks, checks, strict=True):
         for a, b in pairs:
-            pair = (int(block.near[a]), int(block.near[b]))
+            pair = (int(block.near[a]), int(block.near[b]))  # each with an own contour: never one contour twice
             if pair not in touches:
                 found.update(pair)
     release_free_memory()

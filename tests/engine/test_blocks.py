@@ -71,20 +71,24 @@ def test_every_contour_is_owned_once_and_its_block_holds_every_stretch_that_can_
         rows = np.stack([s.base, s.top], axis=1)
         lo, hi = rows.min(axis=1), rows.max(axis=1)
         segments.append(shapely.box(*np.minimum(lo[:-1], lo[1:]).T, *np.maximum(hi[:-1], hi[1:]).T))
-    cut_somewhere = False
+    cut_somewhere = several = False
     for b in found:
         own_segments = np.concatenate([segments[i] for i in b.own])
         tree = shapely.STRtree(own_segments)
-        stretch = {int(i): (int(f), int(la)) for i, f, la in zip(b.near, b.first, b.last, strict=True)}
+        stretches: dict[int, list[tuple[int, int]]] = {}
+        for i, f, la in zip(b.near.tolist(), b.first.tolist(), b.last.tolist(), strict=True):
+            stretches.setdefault(i, []).append((f, la))
         for j in set(range(len(surfaces))) - set(b.own.tolist()):
             touching = np.flatnonzero([len(tree.query(g)) > 0 for g in segments[j]])
             if not len(touching):
                 continue
-            assert j in stretch, f"contour {j} reaches block {b.own[:3]} but is not near it"
-            first, last = stretch[j]
-            assert first <= touching[0] and touching[-1] + 1 <= last
-            cut_somewhere |= last - first + 1 < len(surfaces[j].base)
+            assert j in stretches, f"contour {j} reaches block {b.own[:3]} but is not near it"
+            for k in touching.tolist():  # segment k (rows k, k + 1) lies in one of j's stretches
+                assert any(f <= k and k + 1 <= la for f, la in stretches[j]), f"contour {j} segment {k} left out"
+            cut_somewhere |= sum(la - f + 1 for f, la in stretches[j]) < len(surfaces[j].base)
+            several |= len(stretches[j]) > 1
     assert cut_somewhere  # the stretches really are cut to the blocks
+    assert several  # and a contour that comes near in two places is checked in both, not in between
 
 
 def test_blocks_find_the_same_contacts_as_the_whole_set(unrepaired: BuiltSet) -> None:
