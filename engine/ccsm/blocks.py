@@ -351,7 +351,7 @@ def _block_tasks(
 
 
 #: Surfaces of a block read from the spool at a time while its task is made.
-NEAR_READ_BATCH = 32
+NEAR_READ_BATCH = 8
 
 #: Bytes of block tasks in flight (sent and not yet answered) before the next block is read: with the
 #: look-ahead's count alone, a run of blocks of long contours held hundreds of MB in the build process.
@@ -415,7 +415,8 @@ def find_crossings_by_block(
     for block, pairs in zip(blocks, checks, strict=True):
         for a, b in pairs:
             pair = (int(block.near[a]), int(block.near[b]))
-            if pair[0] != pair[1] and pair not in touches:  # two stretches of one contour meet where they join
+            # Two stretches of one contour meet where they join (the input touch test would say so too).
+            if pair[0] != pair[1] and pair not in touches:
                 found.update(pair)
     release_free_memory()
     return found
