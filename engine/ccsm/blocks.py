@@ -2,12 +2,13 @@
 contours that can reach them, not against the whole set (docs/design.md section 4.8, issue 12 item 2).
 
 Every surface is cut into pieces of :data:`INDEX_PIECE_SEGMENTS` segments, and each piece has a swept box: the
-box of its rows at t = 0 and t = 1, which holds its slices at every t. A contour belongs to the block of a
-square grid that holds its box centre. A block's *near* stretches are its own contours and, of every other
-contour, each run of consecutive pieces whose boxes meet a piece box of an own contour: the only rows whose
-slices can meet the block's contours. Checking each block's own contours against its near
-stretches therefore finds exactly the meeting pairs a check of the whole set finds (each pair at least once,
-from the block of either contour), so the repair's decisions do not change. The piece boxes stay in memory
+box of its rows at t = 0 and t = 1, which holds its slices at every t. A piece belongs to the block of a
+square grid that holds its box centre, and a block's *own* stretches are its runs of consecutive pieces. Its
+*near* stretches are, of every contour, the runs of consecutive pieces whose boxes meet an own piece's box:
+the only rows whose slices can meet the own stretches. Checking each block's own stretches against its near
+ones therefore finds exactly the meeting pairs of contours a check of the whole set finds (each meeting
+point from the block of either piece), so the repair's decisions do not change, and no block's work grows
+with the longest contour. The piece boxes stay in memory
 (a few numbers per 16 rows); a block's surfaces are read from the spool only when its check is sent, so
 blocks are checked apart from each other, on any executor, with memory for a few blocks at a time.
 """
@@ -140,23 +141,28 @@ def _round(values: NDArray[np.float64], direction: float) -> NDArray[np.float32]
 
 @dataclass(frozen=True)
 class Block:
-    """One cell of the grid.
+    """One cell of the grid: the stretches of contour it checks.
 
     Attributes
     ----------
-    own
-        (k,) indices of the contours whose box centre lies in the cell.
     near
-        (m,) sorted indices of ``own`` and of every contour with a piece whose box meets a piece box of an own
-        one, once per stretch (a contour may come near in several places).
+        (m,) the contour of each stretch, sorted (a contour may have several).
     first, last
-        (m,) the rows of each near stretch to check: first to last (inclusive); -1 for a whole own contour.
+        (m,) the rows of each stretch, first to last (inclusive); -1, -1 for a whole contour.
+    own
+        (m,) True for the block's own stretches: runs of the pieces whose box centre lies in the cell, of the
+        contours to check. The others are the runs of pieces whose boxes meet an own piece's box, checked
+        against the own stretches only.
     """
 
-    own: NDArray[np.intp]
     near: NDArray[np.intp]
     first: NDArray[np.intp]
     last: NDArray[np.intp]
+    own: NDArray[np.bool_]
+
+    def own_contours(self) -> NDArray[np.intp]:
+        """The contours with an own stretch in the block (sorted)."""
+        return np.unique(self.near[self.own])
 
 
 def surface_boxes(surfaces: Sequence[CCS]) -> NDArray[np.float64]:
@@ -170,7 +176,10 @@ def spatial_blocks(
     only: NDArray[np.intp] | None = None,
     per_block: int = BLOCK_CONTOURS,
 ) -> list[Block]:
-    """The blocks of a grid over the owned contours' box centres, in row-major order; empty cells are left out.
+    """The blocks of a grid over the owned contours' pieces, in row-major order; empty cells are left out.
+
+    Each piece of an owned contour belongs to the cell that holds its box centre, so a contour longer than a
+    cell is checked in pieces by the cells it crosses, and no block's work grows with the longest contour.
 
     Parameters
     ----------
@@ -179,7 +188,7 @@ def spatial_blocks(
     pieces
         The pieces of the same n surfaces.
     only
-        If given, a block owns only these contours (the ones to check); all contours still count as near.
+        If given, a block owns only these contours' pieces (the ones to check); all contours still count as near.
     per_block
         Owned contours per block on average (the grid has about len(only) / per_block cells).
     """
@@ -187,28 +196,29 @@ def spatial_blocks(
     owned = np.arange(n, dtype=np.intp) if only is None else np.asarray(only, dtype=np.intp)
     if n == 0 or len(owned) == 0:
         return []
-    # The grid spans the owned contours only: a few rebuilt contours get small blocks of their own. Cells are
+    # The grid spans the owned pieces only: a few rebuilt contours get small blocks of their own. Cells are
     # sized by rows too, so a block of long contours is no heavier for its worker than one of short ones.
     piece_boxes, first, last, owner, start = pieces.arrays()
-    rows = int((start[owned + 1] - start[owned]).sum()) * INDEX_PIECE_SEGMENTS
+    owned_pieces = concatenated_ranges(start[owned], start[owned + 1] - start[owned])
+    rows = len(owned_pieces) * INDEX_PIECE_SEGMENTS
     side = max(1, math.ceil(math.sqrt(len(owned) / max(1, per_block))), math.ceil(math.sqrt(rows / BLOCK_ROWS)))
-    centres = (boxes[owned, :2] + boxes[owned, 2:]) / 2
+    centres = (piece_boxes[owned_pieces, :2].astype(np.float64) + piece_boxes[owned_pieces, 2:]) / 2
     lo = centres.min(axis=0)
     span = np.maximum(centres.max(axis=0) - lo, 1e-9)
     cell = np.minimum((((centres - lo) / span) * side).astype(np.intp), side - 1)
     key = cell[:, 1] * side + cell[:, 0]
+    del centres, cell
     order = np.argsort(key, kind="stable")
     buckets = _Buckets(piece_boxes)
     blocks = []
-    for group in np.split(owned[order], np.flatnonzero(np.diff(key[order])) + 1):
+    for group in np.split(owned_pieces[order], np.flatnonzero(np.diff(key[order])) + 1):
         own = np.sort(group)
-        own_pieces = concatenated_ranges(start[own], start[own + 1] - start[own])
         # A tree of the pieces near this block only: one tree of every piece of a big set would hold a
         # geometry per piece at once (hundreds of MB at a few million vertices).
-        candidates = buckets.near(piece_boxes[own_pieces])
+        candidates = buckets.near(piece_boxes[own])
         tree = shapely.STRtree(_boxes(piece_boxes[candidates]))
-        _, hit = tree.query(_boxes(piece_boxes[own_pieces]))
-        blocks.append(_block(own, candidates[hit], first, last, owner))
+        _, hit = tree.query(_boxes(piece_boxes[own]))
+        blocks.append(_block(own, candidates[hit], first, last, owner, start))
     return blocks
 
 
@@ -265,28 +275,32 @@ def _block(
     first: NDArray[np.integer],
     last: NDArray[np.integer],
     owner: NDArray[np.integer],
+    start: NDArray[np.intp],
 ) -> Block:
-    """A block from its own contours and the pieces that meet theirs: each other contour's stretches are its
-    runs of consecutive pieces met (a long contour that winds in and out of the block's reach is checked only
-    where it comes near, not from its first piece met to its last)."""
-    hit = np.unique(hit)  # pieces are in owner order, and in order along each owner
-    others = hit[~np.isin(owner[hit], own)]
-    if len(others):
-        breaks = np.flatnonzero((np.diff(others) != 1) | (np.diff(owner[others]) != 0)) + 1
-        run_start = others[np.concatenate([[0], breaks])]
-        run_end = others[np.concatenate([breaks, [len(others)]]) - 1]
-        owners, rows_from, rows_to = owner[run_start], first[run_start], last[run_end]
-    else:
-        owners = rows_from = rows_to = np.zeros(0, dtype=np.intp)
-    near = np.concatenate([own, owners]).astype(np.intp)
-    order = np.argsort(near, kind="stable")
-    whole = np.full(len(own), -1, dtype=np.intp)
+    """A block from its own pieces and the pieces that meet them: the runs of consecutive own pieces are its
+    own stretches, the runs of the other pieces met its near ones (a long contour that winds in and out of
+    the block's reach is checked only where it comes near)."""
+    others = np.setdiff1d(np.unique(hit), own, assume_unique=True)
+    runs = [_runs(own, owner), _runs(others, owner)]
+    begin = np.concatenate([r[0] for r in runs])
+    end = np.concatenate([r[1] for r in runs])
+    contour = owner[begin].astype(np.intp)
+    whole = (begin == start[contour]) & (end == start[contour + 1] - 1)
+    order = np.argsort(contour, kind="stable")
     return Block(
-        own=own,
-        near=near[order],
-        first=np.concatenate([whole, rows_from]).astype(np.intp)[order],
-        last=np.concatenate([whole, rows_to]).astype(np.intp)[order],
+        near=contour[order],
+        first=np.where(whole, -1, first[begin]).astype(np.intp)[order],
+        last=np.where(whole, -1, last[end]).astype(np.intp)[order],
+        own=np.repeat([True, False], [len(runs[0][0]), len(runs[1][0])])[order],
     )
+
+
+def _runs(pieces: NDArray[np.intp], owner: NDArray[np.integer]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """First and last piece of each run of consecutive pieces of one contour among sorted ``pieces``."""
+    if not len(pieces):
+        return pieces, pieces
+    breaks = np.flatnonzero((np.diff(pieces) != 1) | (np.diff(owner[pieces]) != 0)) + 1
+    return pieces[np.concatenate([[0], breaks])], pieces[np.concatenate([breaks, [len(pieces)]]) - 1]
 
 
 def block_contacts(
@@ -333,11 +347,11 @@ def _block_tasks(
                 p if f < 0 else _stretch(surface_of(p), f, la)
                 for p, f, la in zip(payloads, b.first[at].tolist(), b.last[at].tolist(), strict=True)
             )
-        yield near, np.searchsorted(b.near, b.own).tolist(), ladder, steps
+        yield near, np.flatnonzero(b.own).tolist(), ladder, steps
 
 
 #: Surfaces of a block read from the spool at a time while its task is made.
-NEAR_READ_BATCH = 32
+NEAR_READ_BATCH = 8
 
 #: Bytes of block tasks in flight (sent and not yet answered) before the next block is read: with the
 #: look-ahead's count alone, a run of blocks of long contours held hundreds of MB in the build process.
@@ -400,8 +414,9 @@ def find_crossings_by_block(
     checks = map_ordered(executor, block_contacts, tasks, weight=_task_bytes, budget=BLOCK_TASK_BUDGET_BYTES)
     for block, pairs in zip(blocks, checks, strict=True):
         for a, b in pairs:
-            pair = (int(block.near[a]), int(block.near[b]))  # each with an own contour: never one contour twice
-            if pair not in touches:
+            pair = (int(block.near[a]), int(block.near[b]))
+            # Two stretches of one contour meet where they join (the input touch test would say so too).
+            if pair[0] != pair[1] and pair not in touches:
                 found.update(pair)
     release_free_memory()
     return found

@@ -56,39 +56,53 @@ def random_lines(n: int = 300, seed: int = 1) -> list[CCS]:
     return out
 
 
-def test_every_contour_is_owned_once_and_its_block_holds_every_stretch_that_can_meet_it() -> None:
+def test_every_segment_is_owned_once_and_its_block_holds_every_stretch_that_can_meet_it() -> None:
     surfaces = random_lines()
     boxes = surface_boxes(surfaces)
     pieces = PieceIndex()
     pieces.put(range(len(surfaces)), surfaces)
     found = spatial_blocks(boxes, pieces, per_block=8)
     assert len(found) > 10
-    owners = np.concatenate([b.own for b in found])
-    assert sorted(owners.tolist()) == list(range(len(surfaces)))
-    # Reference: every segment's swept box against every segment of the block's own contours.
+
+    def spans(b, which):  # (contour, first row, last row) of the block's own or other stretches
+        return [
+            (i, 0, len(surfaces[i].base) - 1) if f < 0 else (i, f, la)
+            for i, f, la, o in zip(b.near.tolist(), b.first.tolist(), b.last.tolist(), b.own.tolist(), strict=True)
+            if o == which
+        ]
+
+    owned = [np.zeros(len(s.base) - 1, dtype=int) for s in surfaces]
+    for b in found:
+        for i, f, la in spans(b, True):
+            owned[i][f:la] += 1
+    assert all((o == 1).all() for o in owned)  # every segment of every contour is in one block's own stretches
+    # Reference: every segment's swept box against every own segment of the block.
     segments = []
     for s in surfaces:
         rows = np.stack([s.base, s.top], axis=1)
         lo, hi = rows.min(axis=1), rows.max(axis=1)
         segments.append(shapely.box(*np.minimum(lo[:-1], lo[1:]).T, *np.maximum(hi[:-1], hi[1:]).T))
-    cut_somewhere = several = False
+    cut_somewhere = several = split_own = False
     for b in found:
-        own_segments = np.concatenate([segments[i] for i in b.own])
-        tree = shapely.STRtree(own_segments)
+        own = spans(b, True)
+        split_own |= any(la - f + 1 < len(surfaces[i].base) for i, f, la in own)
         stretches: dict[int, list[tuple[int, int]]] = {}
-        for i, f, la in zip(b.near.tolist(), b.first.tolist(), b.last.tolist(), strict=True):
+        for i, f, la in own + spans(b, False):
             stretches.setdefault(i, []).append((f, la))
-        for j in set(range(len(surfaces))) - set(b.own.tolist()):
-            touching = np.flatnonzero([len(tree.query(g)) > 0 for g in segments[j]])
-            if not len(touching):
-                continue
-            assert j in stretches, f"contour {j} reaches block {b.own[:3]} but is not near it"
-            for k in touching.tolist():  # segment k (rows k, k + 1) lies in one of j's stretches
-                assert any(f <= k and k + 1 <= la for f, la in stretches[j]), f"contour {j} segment {k} left out"
-            cut_somewhere |= sum(la - f + 1 for f, la in stretches[j]) < len(surfaces[j].base)
-            several |= len(stretches[j]) > 1
+        for i, f, la in own:
+            tree = shapely.STRtree(segments[i][f:la])
+            for j in set(range(len(surfaces))) - {i}:
+                touching = np.flatnonzero([len(tree.query(g)) > 0 for g in segments[j]])
+                if not len(touching):
+                    continue
+                assert j in stretches, f"contour {j} reaches contour {i} rows {f}-{la} but is not near it"
+                for k in touching.tolist():  # segment k (rows k, k + 1) lies in one of j's stretches
+                    assert any(f2 <= k and k + 1 <= la2 for f2, la2 in stretches[j]), f"{j} segment {k} left out"
+                cut_somewhere |= sum(la2 - f2 + 1 for f2, la2 in stretches[j]) < len(surfaces[j].base)
+                several |= len(stretches[j]) > 1
     assert cut_somewhere  # the stretches really are cut to the blocks
     assert several  # and a contour that comes near in two places is checked in both, not in between
+    assert split_own  # a contour longer than a cell is owned in pieces by the cells it crosses
 
 
 def test_blocks_find_the_same_contacts_as_the_whole_set(unrepaired: BuiltSet) -> None:
@@ -135,7 +149,7 @@ def test_repair_by_small_blocks_makes_the_surfaces_of_the_repair_over_the_whole_
     assert left == set()
 
 
-def test_a_block_task_carries_its_own_surfaces_whole_and_the_others_cut_to_their_stretches(tmp_path) -> None:
+def test_a_block_task_carries_whole_surfaces_as_stored_and_stretches_cut(tmp_path) -> None:
     from engine.ccsm.blocks import _block_tasks
     from engine.ccsm.spool import surface_of
     from engine.store.spool import DiskSpool
@@ -148,7 +162,7 @@ def test_a_block_task_carries_its_own_surfaces_whole_and_the_others_cut_to_their
     found = spatial_blocks(surface_boxes(surfaces), pieces, per_block=8)
     cut = 0
     for b, (near, own, *_) in zip(found, _block_tasks(found, spool, np.ones(2), [0]), strict=True):
-        assert [int(b.near[k]) for k in own] == b.own.tolist()
+        assert own == np.flatnonzero(b.own).tolist()
         for k, (i, f, la) in enumerate(zip(b.near.tolist(), b.first.tolist(), b.last.tolist(), strict=True)):
             s = surface_of(near[k])
             whole = surfaces[i]
