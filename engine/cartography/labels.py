@@ -13,7 +13,7 @@ kept only if its screen box does not meet a kept one at the zoom both are first 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -254,7 +254,7 @@ def _keep_apart(
 
 
 def place_labels(
-    sources: Sequence[LabelSource],
+    sources: Iterable[LabelSource],
     ladder: NDArray[np.float64],
     latitude: float,
     max_zoom: float,
@@ -265,7 +265,8 @@ def place_labels(
     Parameters
     ----------
     sources
-        The contours to label (index contours), with their first zooms.
+        The contours to label (index contours), with their first zooms: read once, and only their candidates
+        and a few numbers kept, so a generator that loads them in batches holds one batch of rows at a time.
     ladder
         (S,) the dataset's scale ladder (of the t tables).
     latitude
@@ -275,6 +276,7 @@ def place_labels(
     """
     style = style or LabelStyle()
     pts, ang, score, zoom, owner = [], [], [], [], []
+    fids, elevations, ranks, labels = [], [], [], []  # of each source
     for k, src in enumerate(sources):
         p, a, sc, fz = contour_candidates(src, ladder, latitude, max_zoom, style)
         pts.append(p)
@@ -282,15 +284,19 @@ def place_labels(
         score.append(sc)
         zoom.append(fz)
         owner.append(np.full(len(p), k, dtype=np.int64))
-    if not sources or not sum(len(o) for o in owner):
+        fids.append(src.fid)
+        elevations.append(src.elevation)
+        ranks.append(src.rank)
+        labels.append(src.text)
+    if not sum(len(o) for o in owner):
         z = np.zeros(0)
         return LabelAnchors(
             np.zeros((0, 2)), z, z, np.zeros(0, np.int64), np.zeros(0, np.int64), z, [], np.zeros((0, 2))
         )
     xy, angle, straight, own = np.concatenate(pts), np.concatenate(ang), np.concatenate(score), np.concatenate(owner)
     first = np.concatenate(zoom)
-    rank = np.array([sources[k].rank for k in own.tolist()], dtype=np.int64)
-    texts = [sources[k].text for k in own.tolist()]
+    rank = np.array(ranks, dtype=np.int64)[own]
+    texts = [labels[k] for k in own.tolist()]
     boxes = box_px(np.array([len(t) for t in texts]), angle, style)
     # Labels shown from smaller scales first (coarser ranks first among them), then straighter places.
     order = np.lexsort((-straight, -rank, first))
@@ -300,9 +306,9 @@ def place_labels(
         xy[placed],
         angle[placed],
         first[placed],
-        np.array([sources[i].fid for i in own[placed].tolist()], dtype=np.int64),
+        np.array(fids, dtype=np.int64)[own[placed]],
         rank[placed],
-        np.array([sources[i].elevation for i in own[placed].tolist()]),
+        np.array(elevations, dtype=np.float64)[own[placed]],
         [texts[i] for i in placed.tolist()],
         boxes[placed],
     )

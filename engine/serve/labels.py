@@ -38,9 +38,9 @@ def place_dataset_labels(store: CCSStore, dataset: str, max_zoom: int) -> Stored
     elevations = store.elevations(dataset)
     carto = dataset_cartography(info, info.interval or infer_interval(elevations), elevations)
     fids = store.all_fids(dataset)
-    sources = []
-    for k in range(0, len(fids), LABEL_BATCH):
-        sources.extend(label_sources(carto, store.load(fids[k : k + LABEL_BATCH])))
+    # A batch of contours at a time: placing keeps each one's candidates, not its rows.
+    batches = (store.load(fids[k : k + LABEL_BATCH]) for k in range(0, len(fids), LABEL_BATCH))
+    sources = (src for records in batches for src in label_sources(carto, records))
     last_zoom = label_last_zoom(max_zoom)
     anchors = place_labels(sources, info.ladder, carto.latitude, last_zoom)
     return stored_labels(anchors, info.data_version, last_zoom)

@@ -166,3 +166,14 @@ def test_label_placement_by_grid_keeps_exactly_the_labels_a_test_against_every_k
     kept = _keep_apart(xy, box, zoom, order)
     assert 200 < len(kept) < n  # some kept, some dropped: the test means something
     assert kept == reference
+
+
+def test_labels_placed_from_sources_read_once_in_a_stream_are_those_placed_from_a_list():
+    """The build places labels from contours loaded a batch at a time (a generator, read once): the same
+    anchors as from the whole list."""
+    sources = [still_source(k, straight_line(40.0 * k), first_zoom=12.0 + (k % 3)) for k in range(30)]
+    from_list = place_labels(sources, LADDER, 36.6, 16.0)
+    streamed = place_labels((s for s in sources), LADDER, 36.6, 16.0)
+    assert streamed.fid.tolist() == from_list.fid.tolist() and len(streamed) > 0
+    np.testing.assert_array_equal(streamed.xy, from_list.xy)
+    assert streamed.text == from_list.text and streamed.elevation.tolist() == from_list.elevation.tolist()
