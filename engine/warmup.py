@@ -15,7 +15,7 @@ import numpy as np
 def warm_up() -> float:
     """Call every compiled kernel on a tiny input; returns the seconds it took."""
     from engine.baselines import ladder, simplify_at_scale
-    from engine.ccsm.similarity import similarity
+    from engine.ccsm.similarity import SimilarityReference, similarity
     from engine.evaluation.levels import ranks_from_levels
     from engine.geom.douglas_peucker import douglas_peucker
     from engine.tiles.significance import row_significance
@@ -27,14 +27,26 @@ def warm_up() -> float:
     for coords, closed in ((ring, True), (line, False)):
         douglas_peucker(coords, 10.0, closed)
         similarity(coords, coords[::2], closed)
+        rows = np.vstack([coords, coords[:1]]) if closed else coords  # a ring's rows are closed paths
+        SimilarityReference.of(coords, closed).slice_similarities(rows, rows * 0.99, np.linspace(0.0, 1.0, 11))
         for method in ("dp", "vw", "wm"):
             levels = ladder(method, coords, closed, levels=5)
             ranks_from_levels(coords, levels)
             simplify_at_scale(method, coords, closed, 250_000)
         row_significance(coords, coords * 0.9)
+    _check_build_crossings(line)
     _render_one_tile(ring, line)
     _check_tile_topology()
     return time.perf_counter() - start
+
+
+def _check_build_crossings(line: np.ndarray) -> None:
+    """The build's crossing check over the ladder's steps, on a line and a copy of it that passes through it."""
+    from engine.ccsm.topology import SweepIndex
+
+    below, above = line - [0.0, 5.0], line + [0.0, 5.0]
+    index = SweepIndex.of([line, below], [line, above])
+    index.contacts_in_steps(np.zeros((2, 1)), np.ones((2, 1)), np.ones((2, 1), dtype=bool))
 
 
 def _check_tile_topology() -> None:

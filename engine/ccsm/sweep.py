@@ -163,3 +163,129 @@ def pieces_meet(
             out,
         )
     return out
+
+
+@njit(cache=True, nogil=True)
+def _slices_of_piece(base, top, first, last, t0, t1, a, b, lo, hi, at):  # pragma: no cover - compiled
+    """Points first..last of a piece at t0 and t1 into a, b (from row ``at``), as ``base + t (top - base)``;
+    returns the piece's box over the motion: min and max x, y of lo = min(a, b), hi = max(a, b)."""
+    bx0 = np.inf
+    by0 = np.inf
+    bx1 = -np.inf
+    by1 = -np.inf
+    for i in range(first, last + 1):
+        j = at + i - first
+        for d in range(2):
+            step = top[i, d] - base[i, d]
+            a[j, d] = base[i, d] + t0 * step
+            b[j, d] = base[i, d] + t1 * step
+            lo[j, d] = min(a[j, d], b[j, d])
+            hi[j, d] = max(a[j, d], b[j, d])
+        bx0 = min(bx0, lo[j, 0])
+        by0 = min(by0, lo[j, 1])
+        bx1 = max(bx1, hi[j, 0])
+        by1 = max(by1, hi[j, 1])
+    return bx0, by0, bx1, by1
+
+
+@njit(cache=True, nogil=True)
+def _pairs_meet_in_steps(
+    base, top, first, last, owner, pp, qq, gap, reach, t0, t1, shown, touch, slack, out
+):  # pragma: no cover - compiled
+    """out[k]: do pieces pp[k] and qq[k] meet in some step s (lines i moving from t0[i, s] to t1[i, s])?
+
+    Pairs come sorted by their lines; once a pair of lines meets, their other pairs of pieces are skipped.
+    """
+    size = 0
+    for k in range(len(first)):
+        size = max(size, last[k] - first[k] + 1)
+    a = np.empty((2 * size, 2))
+    b = np.empty((2 * size, 2))
+    lo = np.empty((2 * size, 2))
+    hi = np.empty((2 * size, 2))
+    met = False
+    for k in range(len(pp)):
+        p = pp[k]
+        q = qq[k]
+        i = owner[p]
+        j = owner[q]
+        if k > 0 and met and owner[pp[k - 1]] == i and owner[qq[k - 1]] == j:
+            continue  # these two lines already meet
+        met = False
+        np_ = last[p] - first[p] + 1
+        nq = last[q] - first[q] + 1
+        for s in range(t0.shape[1]):
+            if not (shown[i, s] and shown[j, s]):
+                continue
+            # A slice at t is within |t| * reach of the base row: farther apart than that, they cannot meet.
+            most_i = max(abs(t0[i, s]), abs(t1[i, s]))
+            most_j = max(abs(t0[j, s]), abs(t1[j, s]))
+            if not gap[k] <= most_i * reach[p] + most_j * reach[q] + touch:
+                continue
+            px0, py0, px1, py1 = _slices_of_piece(base, top, first[p], last[p], t0[i, s], t1[i, s], a, b, lo, hi, 0)
+            qx0, qy0, qx1, qy1 = _slices_of_piece(base, top, first[q], last[q], t0[j, s], t1[j, s], a, b, lo, hi, np_)
+            if px0 > qx1 or qx0 > px1 or py0 > qy1 or qy0 > py1:
+                continue  # their boxes over this motion miss each other
+            end = np_ + nq - 1
+            if _vertices_reach_segments(a, b, lo, hi, 0, np_ - 1, np_, end, slack) or _vertices_reach_segments(
+                a, b, lo, hi, np_, end, 0, np_ - 1, slack
+            ):
+                met = True
+                break
+        out[k] = met
+
+
+def pairs_meet_in_steps(
+    base: NDArray[np.float64],
+    top: NDArray[np.float64],
+    first: NDArray[np.intp],
+    last: NDArray[np.intp],
+    owner: NDArray[np.intp],
+    pairs: tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]],
+    t0: NDArray[np.float64],
+    t1: NDArray[np.float64],
+    shown: NDArray[np.bool_],
+    touch: float,
+) -> NDArray[np.bool_]:
+    """For each pair of pieces, whether they meet in any of S steps of the motion, each line i moving from its
+    slice at ``t0[i, s]`` to its slice at ``t1[i, s]`` in step s, if ``shown[i, s]``.
+
+    Parameters
+    ----------
+    base, top
+        (N, 2) float64 points of all pieces at t = 0 and t = 1 (metres); a slice at t is ``base + t (top - base)``.
+    first, last, owner
+        (P,) each piece's first and last point, and its line.
+    pairs
+        (p, q, gap, reach): (K,) pieces of each pair, sorted by their lines (p's, then q's), their distance
+        at t = 0, and (P,) each piece's largest move from t = 0 to t = 1.
+    t0, t1, shown
+        (lines, S) each line's t at both ends of each step, and whether it is shown in it.
+    touch
+        Slack on the distance test, metres: pairs that far apart at the limit are kept.
+
+    Returns
+    -------
+    (K,) bool; a pair of pieces whose lines are already found to meet by an earlier pair may be left False.
+    """
+    p, q, gap, reach = pairs
+    out = np.zeros(len(p), dtype=np.bool_)
+    if len(p):
+        _pairs_meet_in_steps(
+            np.ascontiguousarray(base, dtype=np.float64),
+            np.ascontiguousarray(top, dtype=np.float64),
+            first.astype(np.int64),
+            last.astype(np.int64),
+            owner.astype(np.int64),
+            p.astype(np.int64),
+            q.astype(np.int64),
+            np.ascontiguousarray(gap, dtype=np.float64),
+            np.ascontiguousarray(reach, dtype=np.float64),
+            np.ascontiguousarray(t0, dtype=np.float64),
+            np.ascontiguousarray(t1, dtype=np.float64),
+            np.ascontiguousarray(shown, dtype=np.bool_),
+            float(touch),
+            CONTACT_SLACK,
+            out,
+        )
+    return out

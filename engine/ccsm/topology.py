@@ -15,13 +15,13 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
-from engine.ccsm.sweep import pieces_meet
+from engine.ccsm.sweep import pairs_meet_in_steps, pieces_meet
 from engine.types import Coords
 
 if TYPE_CHECKING:
     from engine.ccsm.ccs import CCS
 
-#: Threads for the crossing checks: GEOS releases the GIL, so the scales are checked side by side.
+#: Threads for the crossing checks: the compiled pass releases the GIL, so two share the pairs of pieces.
 CHECK_THREADS = 2
 
 #: Input lines closer than this, metres, already touch: a surface's base row reproduces L0 only to about
@@ -122,7 +122,7 @@ class SweepIndex:
     first, last, owner
         (P,) first and last point of each piece, and its line.
     p, q
-        (K,) candidate pairs of pieces, each pair once.
+        (K,) candidate pairs of pieces, each pair once, sorted by the lines of p, then of q.
     gap
         (K,) distance between the two pieces of each pair at t = 0 (metres).
     reach
@@ -165,6 +165,9 @@ class SweepIndex:
         p, q, gap, reach = _close_enough(base, top, first, last, p[keep], q[keep])
         if not len(p):
             return cls.empty()
+        # Pairs of the same two lines side by side: once the lines meet, :meth:`contacts_in_steps` skips the rest.
+        by_lines = np.lexsort((owner[q], owner[p]))
+        p, q, gap = p[by_lines], q[by_lines], gap[by_lines]
         # Keep only the points of pieces in some pair: each step then moves and boxes just those.
         used, pair_index = np.unique(np.concatenate([p, q]), return_inverse=True)
         point, counts = _points_of(first[used], last[used])
@@ -211,6 +214,34 @@ class SweepIndex:
         p, q = p[near], q[near]
         hit = pieces_meet(a, b, self.first, self.last, p, q)
         op, oq = self.owner[p[hit]], self.owner[q[hit]]
+        return {(int(min(x, y)), int(max(x, y))) for x, y in zip(op.tolist(), oq.tolist(), strict=True)}
+
+    def contacts_in_steps(
+        self, t0: NDArray[np.float64], t1: NDArray[np.float64], shown: NDArray[np.bool_], threads: int = 1
+    ) -> set[tuple[int, int]]:
+        """Pairs (i, j), i < j, of lines that meet in some step s, each line i going from its slice at
+        ``t0[i, s]`` to its slice at ``t1[i, s]`` if ``shown[i, s]``: the union of :meth:`contacts` over the
+        columns, in one compiled pass that leaves a pair of pieces at its first contact and a pair of lines
+        at its first pair of pieces that meets (per step, NumPy's overhead had cost more than the tests).
+
+        ``threads`` share the pairs of pieces (the pass releases the GIL).
+        """
+        if not len(self.p):
+            return set()
+        cuts = np.linspace(0, len(self.p), max(1, threads) + 1).astype(np.intp)
+
+        def part(k: int) -> NDArray[np.bool_]:
+            lo, hi = cuts[k], cuts[k + 1]
+            pairs = (self.p[lo:hi], self.q[lo:hi], self.gap[lo:hi], self.reach)
+            args = (self.base, self.top, self.first, self.last, self.owner, pairs)
+            return pairs_meet_in_steps(*args, t0, t1, shown, INPUT_TOUCH_M)
+
+        if threads > 1:
+            with ThreadPoolExecutor(max_workers=threads) as pool:
+                hit = np.concatenate(list(pool.map(part, range(threads))))
+        else:
+            hit = part(0)
+        op, oq = self.owner[self.p[hit]], self.owner[self.q[hit]]
         return {(int(min(x, y)), int(max(x, y))) for x, y in zip(op.tolist(), oq.tolist(), strict=True)}
 
 
@@ -347,12 +378,8 @@ def new_contact_pairs(
     index = SweepIndex.of([s.base for s in surfaces], [s.top for s in surfaces], only)
     tables = np.array([s.t_at_scale for s in surfaces]).reshape(len(surfaces), -1)
     vanish = np.array([s.vanish_scale for s in surfaces])
-
-    def check(k: int) -> set[tuple[int, int]]:
-        return index.contacts(tables[:, k], tables[:, k + 1], vanish > ladder[k])
-
-    with ThreadPoolExecutor(max_workers=CHECK_THREADS) as pool:
-        return set().union(*pool.map(check, steps))
+    k = np.asarray(steps, dtype=np.intp)
+    return index.contacts_in_steps(tables[:, k], tables[:, k + 1], vanish[:, None] > ladder[k][None, :], CHECK_THREADS)
 
 
 def find_new_crossings(
