@@ -39,6 +39,10 @@ class StoreError(CCSMError):
     """The store file is missing, corrupt or of another version."""
 
 
+class StoreFormatError(StoreError):
+    """The store was written by a version of ccsm with another store format."""
+
+
 class StoreUnwritable(StoreError):
     """The store (or the folder of uploads beside it) cannot be written: a full disk, a read-only file system."""
 

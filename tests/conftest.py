@@ -14,6 +14,15 @@ from synthetic_shapes import ORIGIN_M, circle_coords, noisy_ellipse_coords, nois
 from engine.types import Contour
 
 
+@pytest.fixture(scope="session", autouse=True)
+def own_cache_home(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """A cache folder of the test run's own ($XDG_CACHE_HOME, where ``ccsm simplify`` keeps built sources): the
+    tests neither read nor fill the user's cache."""
+    import os
+
+    os.environ["XDG_CACHE_HOME"] = str(tmp_path_factory.mktemp("xdg-cache"))
+
+
 @pytest.fixture
 def circle_ring() -> Contour:
     """A 72-vertex circle of radius 400 m."""

@@ -134,6 +134,23 @@ def cartography_options(
     return None if options == CartographyOptions() else options.checked()
 
 
+def _open_cache(path: Path, *, is_default: bool) -> CCSStore:
+    """The store of built sources. The default one is only a cache: one of an older store format (left by an
+    earlier version of ccsm) is replaced by a new one, as the content hashes would rebuild it anyway. A store
+    given with ``--store`` is the user's, and is never replaced (its format error is shown)."""
+    from engine.errors import StoreFormatError
+    from engine.store.sqlite import CCSStore
+
+    try:
+        return CCSStore(path)
+    except StoreFormatError:
+        if not is_default:
+            raise
+        for stale in (path, path.with_name(path.name + "-wal"), path.with_name(path.name + "-shm")):
+            stale.unlink(missing_ok=True)
+        return CCSStore(path)
+
+
 def default_cache_store() -> Path:
     """Where ``ccsm simplify`` keeps what it builds, so a second scale or method costs seconds."""
     base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
@@ -255,7 +272,6 @@ def build_into_cache(
     source, or an export of it, reuses the build.
     """
     from engine.serve.datasets import SourceSpec, build_dataset, source_hash
-    from engine.store.sqlite import CCSStore
 
     spec = SourceSpec(
         path=source.resolve(),
@@ -270,7 +286,7 @@ def build_into_cache(
     spec = replace(spec, dataset="src-" + source_hash(spec.path, spec.params())[:16])
     store_path = store or default_cache_store()
     try:
-        cache = CCSStore(store_path)
+        cache = _open_cache(store_path, is_default=store is None)
     except OSError as exc:
         fail(f"cannot open the store {store_path}: {exc.strerror or exc}")
     with _progress() as progress:

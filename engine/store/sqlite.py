@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from engine.errors import BuildCancelled, StoreError, StoreUnwritable, UnknownLayer
+from engine.errors import BuildCancelled, StoreError, StoreFormatError, StoreUnwritable, UnknownLayer
 from engine.scratch import host_name, pid_alive
 from engine.types import Coords
 
@@ -481,7 +481,7 @@ class CCSStore:
         except sqlite3.DatabaseError as exc:
             raise StoreError(f"store {self.path.name} cannot be opened: {exc}") from exc
         if row is None or int(row[0]) != STORE_FORMAT:
-            raise StoreError(
+            raise StoreFormatError(
                 f"store {self.path.name} has format {row[0] if row else 'unknown'}, expected {STORE_FORMAT}"
             )
 

@@ -228,3 +228,49 @@ def test_evaluate_ccsm_curve_is_continuous(evaluation_dir: Path) -> None:
     assert float(jumps["ccsm"]["mean_curve_rise_max"]) <= 1e-9
     assert int(jumps["ccsm"]["contours_rising"]) <= int(jumps["dp"]["contours_rising"])
     assert math.isfinite(dp[-1])
+
+
+def _older_format_store(path: Path) -> None:
+    """A store file as an earlier ccsm, with another store format, left it."""
+    import sqlite3
+
+    from engine.store.sqlite import CCSStore
+
+    CCSStore(path).close()
+    con = sqlite3.connect(path)
+    with con:
+        con.execute("UPDATE store_meta SET value = '2' WHERE key = 'format'")
+    con.close()
+
+
+def _meta(path: Path) -> list[tuple[str, str]]:
+    import sqlite3
+
+    con = sqlite3.connect(path)
+    try:
+        return sorted(con.execute("SELECT key, value FROM store_meta"))
+    finally:
+        con.close()
+
+
+def test_simplify_replaces_a_default_cache_of_an_older_store_format(subset_path, tmp_path, monkeypatch) -> None:
+    from engine.store.sqlite import STORE_FORMAT, CCSStore
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    cache = tmp_path / "cache" / "ccsm" / "sources.ccsm.sqlite"
+    cache.parent.mkdir(parents=True)
+    _older_format_store(cache)
+    result = run("simplify", subset_path, "--method", "dp", "-o", tmp_path / "out.geojson", "--workers", "1")
+    assert result.exit_code == 0, result.output
+    assert CCSStore(cache, readonly=True).dataset_ids()  # a new cache of this format, holding the source
+    assert STORE_FORMAT != 2
+
+
+def test_simplify_never_replaces_a_store_given_with_store(subset_path, tmp_path) -> None:
+    mine = tmp_path / "mine.sqlite"
+    _older_format_store(mine)
+    before = _meta(mine)
+    result = run("simplify", subset_path, "--store", mine, "-o", tmp_path / "out.geojson", "--workers", "1")
+    assert result.exit_code == 2
+    assert "has format 2" in result.output
+    assert _meta(mine) == before and ("format", "2") in before  # the user's store kept as it was
