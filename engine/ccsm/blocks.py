@@ -160,10 +160,6 @@ class Block:
     last: NDArray[np.intp]
     own: NDArray[np.bool_]
 
-    def own_contours(self) -> NDArray[np.intp]:
-        """The contours with an own stretch in the block (sorted)."""
-        return np.unique(self.near[self.own])
-
 
 def surface_boxes(surfaces: Sequence[CCS]) -> NDArray[np.float64]:
     """(n, 4) box (minx, miny, maxx, maxy), metres, of each surface's base and top rows: every slice lies inside."""

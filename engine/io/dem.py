@@ -296,14 +296,10 @@ def _at_least_one(levels: Iterator[LevelLines], message: str) -> Iterator[LevelL
         raise SourceError(message)
 
 
-def trace_levels(z: np.ma.MaskedArray, levels: NDArray[np.float64]) -> list[LevelLines]:
-    """Lines of every level in grid index space (x = column, y = row of the pixel centre), levels without a
-    line left out; a closed ring repeats its first vertex at the end, as contourpy returns it."""
-    return list(iter_levels(z, levels))
-
-
 def iter_levels(z: np.ma.MaskedArray, levels: NDArray[np.float64]) -> Iterator[LevelLines]:
-    """:func:`trace_levels`, each level traced when it is read."""
+    """Lines of every level in grid index space (x = column, y = row of the pixel centre), each level traced
+    when it is read, levels without a line left out; a closed ring repeats its first vertex at the end, as
+    contourpy returns it."""
     generator = contourpy.contour_generator(
         z=z, name="serial", line_type=contourpy.LineType.ChunkCombinedOffset, chunk_size=0
     )

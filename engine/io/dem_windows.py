@@ -30,7 +30,7 @@ from rasterio.windows import Window
 from scipy.spatial import cKDTree
 
 from engine.errors import InvalidParameter, SourceError
-from engine.io.dem import LevelLines, contour_levels, trace_levels
+from engine.io.dem import LevelLines, contour_levels, iter_levels
 from engine.io.scratch import ReadScratch
 from engine.parallel import map_ordered
 
@@ -121,7 +121,7 @@ def trace_window(path: str, window: Window, interval: float) -> tuple[list[Level
     zmin, zmax = float(z.min()), float(z.max())
     shift = np.array([window.col_off, window.row_off], dtype=np.float64)
     levels = contour_levels(zmin, zmax, interval)
-    traced = [(level, [line + shift for line in lines]) for level, lines in trace_levels(z, levels)]
+    traced = [(level, [line + shift for line in lines]) for level, lines in iter_levels(z, levels)]
     return traced, zmin, zmax
 
 
@@ -179,7 +179,7 @@ def contour_windows(
     Returns
     -------
     (levels, header)
-        Each level's lines in whole-grid index space as :func:`engine.io.dem.trace_levels` gives them, and
+        Each level's lines in whole-grid index space as :func:`engine.io.dem.iter_levels` gives them, and
         the grid's header (its geotransform and CRS).
 
     Raises
