@@ -74,7 +74,10 @@ def dask_executor(address: str) -> Iterator[Executor]:
     except (OSError, TimeoutError) as exc:
         raise InvalidParameter(f"scheduler {address}: cannot connect ({exc})") from exc
     try:
-        yield SingleThreadedExecutor(client.get_executor())
+        # pure=False: a task's key is a random id, not a hash of its arguments. Dask would otherwise walk and
+        # hash every contour of every task in this process (the client), a serial cost that took a second
+        # core's worth of time from two workers; a build never submits the same task twice anyway.
+        yield SingleThreadedExecutor(client.get_executor(pure=False))
     finally:
         client.close()
 
