@@ -3,10 +3,13 @@ real ``dask scheduler`` and N single-threaded ``dask worker`` processes on loopb
 compared byte for byte.
 
 The goal is two workers at least 1.8x as fast as one on a 2-core machine: everything but the client's own share
-(joining the windows' lines, fitting the scale model, writing the store) runs on the workers.
+(reading the source, fitting the scale model, writing the store) runs on the workers. The CPU seconds of the
+client (the ``ccsm build`` process), of the scheduler and of the workers during each build are printed with it:
+with one worker the client's work runs on the other core for free, with two it takes a core from them.
 
-Usage: python bench/bench_dask.py [--dem PATH --interval 20] [--workers 1,2] [--repeat 1]
-(default DEM: the 4x terrain of bench_scale.py, written into var/bench-scale if missing)
+Usage: python bench/bench_dask.py [--dem PATH --interval 20] [--workers 1,2] [--repeat 1] [--code DIR ...]
+(default DEM: the 4x terrain of bench_scale.py, written into var/bench-scale if missing; --code: the checkouts
+whose code runs the builds, e.g. ``--code /work/main --code .`` to compare two in one run)
 """
 
 from __future__ import annotations
