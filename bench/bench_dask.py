@@ -3,10 +3,13 @@ real ``dask scheduler`` and N single-threaded ``dask worker`` processes on loopb
 compared byte for byte.
 
 The goal is two workers at least 1.8x as fast as one on a 2-core machine: everything but the client's own share
-(joining the windows' lines, fitting the scale model, writing the store) runs on the workers.
+(reading the source, fitting the scale model, writing the store) runs on the workers. The CPU seconds of the
+client (the ``ccsm build`` process), of the scheduler and of the workers during each build are printed with it:
+with one worker the client's work runs on the other core for free, with two it takes a core from them.
 
-Usage: python bench/bench_dask.py [--dem PATH --interval 20] [--workers 1,2] [--repeat 1]
-(default DEM: the 4x terrain of bench_scale.py, written into var/bench-scale if missing)
+Usage: python bench/bench_dask.py [--dem PATH --interval 20] [--workers 1,2] [--repeat 1] [--code DIR ...]
+(default DEM: the 4x terrain of bench_scale.py, written into var/bench-scale if missing; --code: the checkouts
+whose code runs the builds, e.g. ``--code /work/main --code .`` to compare two in one run)
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import os
+import resource
 import socket
 import subprocess
 import sys
@@ -27,7 +31,11 @@ sys.path.insert(0, str(REPO / "tests"))
 sys.path.insert(0, str(REPO / "bench"))
 
 DASK = Path(sys.executable).with_name("dask")
-ENV = {**os.environ, "PYTHONPATH": str(REPO), "CCSM_SERVE_SAMPLE": "false"}
+
+
+def code_env(code: Path) -> dict[str, str]:
+    """The environment that makes the client, the scheduler and the workers run the checkout at ``code``."""
+    return {**os.environ, "PYTHONPATH": str(code), "CCSM_SERVE_SAMPLE": "false"}
 
 
 def free_port() -> int:
@@ -36,19 +44,19 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def start_cluster(workers: int, logs: Path) -> tuple[str, list[subprocess.Popen[bytes]]]:
+def start_cluster(workers: int, logs: Path, env: dict[str, str]) -> tuple[str, list[subprocess.Popen[bytes]]]:
     """A scheduler and ``workers`` single-threaded workers on loopback; the address and the processes."""
     from distributed import Client
 
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
     scheduler = [str(DASK), "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"]
-    procs = [subprocess.Popen(scheduler, env=ENV, stdout=open(logs / "scheduler.log", "wb"), stderr=subprocess.STDOUT)]  # noqa: SIM115
+    procs = [subprocess.Popen(scheduler, env=env, stdout=open(logs / "scheduler.log", "wb"), stderr=subprocess.STDOUT)]  # noqa: SIM115
     time.sleep(2.0)
     for k in range(workers):
         worker = [str(DASK), "worker", address, "--nworkers", "1", "--nthreads", "1", "--no-dashboard",
                   "--name", f"w{k}", "--host", "127.0.0.1"]
-        procs.append(subprocess.Popen(worker, env=ENV, stdout=open(logs / f"w{k}.log", "wb"), stderr=subprocess.STDOUT))  # noqa: SIM115
+        procs.append(subprocess.Popen(worker, env=env, stdout=open(logs / f"w{k}.log", "wb"), stderr=subprocess.STDOUT))  # noqa: SIM115
     with Client(address, timeout=30) as client:
         client.wait_for_workers(workers, timeout=60)
     return address, procs
@@ -64,13 +72,42 @@ def stop(procs: list[subprocess.Popen[bytes]]) -> None:
             proc.wait()
 
 
-def build(dem: Path, interval: float, store: Path, scheduler: str) -> float:
-    """Wall time of ``ccsm build`` on the cluster, as a user runs it."""
+def cpu_seconds(proc: subprocess.Popen[bytes]) -> float:
+    """CPU seconds (user + system) used so far by ``proc`` and its children (a worker's nanny runs the worker)."""
+    import psutil
+
+    total = 0.0
+    parent = psutil.Process(proc.pid)
+    for p in [parent, *parent.children(recursive=True)]:
+        try:
+            t = p.cpu_times()
+        except psutil.NoSuchProcess:
+            continue
+        total += t.user + t.system
+    return total
+
+
+def client_cpu() -> float:
+    """CPU seconds of this process's finished children: the ``ccsm build`` clients run so far."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def build(
+    dem: Path, interval: float, store: Path, scheduler: str, procs: list[subprocess.Popen[bytes]], env: dict[str, str]
+) -> tuple[float, float, float, float]:
+    """Wall time of ``ccsm build`` on the cluster, as a user runs it, and the CPU seconds it took in the
+    client, the scheduler and the workers: where the client's share is large, two workers cannot be twice
+    as fast as one (the client's serial work runs beside one worker on the other core, but not beside two)."""
     command = [sys.executable, "-c", "from app.cli import main; main()", "build", str(dem), "--interval",
                str(interval), "--store", str(store), "--id", "bench", "--force", "--scheduler", scheduler]
+    before = [cpu_seconds(p) for p in procs]
+    client0 = client_cpu()
     t0 = time.perf_counter()
-    subprocess.run(command, cwd=REPO, env=ENV, check=True, capture_output=True)
-    return time.perf_counter() - t0
+    subprocess.run(command, cwd=env["PYTHONPATH"], env=env, check=True, capture_output=True)
+    seconds = time.perf_counter() - t0
+    used = [cpu_seconds(p) - b for p, b in zip(procs, before, strict=True)]
+    return seconds, client_cpu() - client0, used[0], sum(used[1:])
 
 
 def tiles_digest(store_path: Path) -> str:
@@ -97,6 +134,10 @@ def main() -> None:
     parser.add_argument("--interval", type=float, default=20.0)
     parser.add_argument("--workers", default="1,2")
     parser.add_argument("--repeat", type=int, default=1)
+    parser.add_argument(
+        "--code", type=Path, action="append", default=None,
+        help="checkout whose code runs the build (repeatable, to compare two in one run) [this one]",
+    )
     args = parser.parse_args()
     dem = args.dem
     if dem is None:
@@ -106,21 +147,32 @@ def main() -> None:
         dem = WORK / f"terrain-{BASE_SIDE * 2}.tif"
         if not dem.exists():
             write_dem(dem, terrain(BASE_SIDE * 2))
+    dem = dem.resolve()
     print(f"DEM {dem.name}, interval {args.interval:g} m; {os.cpu_count()} cores; best of {args.repeat}")
-    print(f"{'workers':>7} {'build s':>8} {'speed-up':>8} {'tiles sha256':>16}")
-    first = None
+    print("CPU s: of the ccsm build client, the scheduler and all workers together, during the build")
+    print(f"{'code':>24} {'workers':>7} {'build s':>8} {'speed-up':>8} {'client':>7} {'sched':>6} {'workers':>8}"
+          f" {'tiles sha256':>16}")
     with tempfile.TemporaryDirectory() as tmp:
-        for n in [int(w) for w in args.workers.split(",")]:
-            logs = Path(tmp) / f"logs{n}"
-            logs.mkdir()
-            address, procs = start_cluster(n, logs)
-            try:
-                store = Path(tmp) / f"w{n}.sqlite"
-                seconds = min(build(dem, args.interval, store, address) for _ in range(args.repeat))
-            finally:
-                stop(procs)
-            first = first or seconds
-            print(f"{n:7d} {seconds:8.1f} {first / seconds:7.2f}x {tiles_digest(store):>16}", flush=True)
+        for code in [c.resolve() for c in args.code or [REPO]]:
+            env = code_env(code)
+            first = None
+            for n in [int(w) for w in args.workers.split(",")]:
+                logs = Path(tmp) / f"logs-{code.name}-{n}"
+                logs.mkdir()
+                address, procs = start_cluster(n, logs, env)
+                try:
+                    store = Path(tmp) / f"{code.name}-w{n}.sqlite"
+                    seconds, client, sched, work = min(
+                        build(dem, args.interval, store, address, procs, env) for _ in range(args.repeat)
+                    )
+                finally:
+                    stop(procs)
+                first = first or seconds
+                print(
+                    f"{str(code)[-24:]:>24} {n:7d} {seconds:8.1f} {first / seconds:7.2f}x {client:7.1f} {sched:6.1f}"
+                    f" {work:8.1f} {tiles_digest(store):>16}",
+                    flush=True,
+                )
 
 
 if __name__ == "__main__":

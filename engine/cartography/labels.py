@@ -13,13 +13,17 @@ kept only if its screen box does not meet a kept one at the zoom both are first 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections import deque
+from collections.abc import Iterable, Iterator, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
+from itertools import islice
 
 import numpy as np
 from numpy.typing import NDArray
 
 from engine.ccsm.regression import t_at_scales
+from engine.parallel import map_ordered
 from engine.tiles.scale import EARTH_RADIUS_M, TILE_SIZE_PX, scale_for_zoom, zoom_for_scale
 
 #: EPSG:3857 metres per pixel at zoom 0 (512 px tiles).
@@ -253,12 +257,28 @@ def _keep_apart(
     return kept
 
 
+#: (k, 2) points, (k,) angles, (k,) straightness and (k,) first zooms: one contour's candidate anchors.
+Candidates = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+
+#: Contours whose candidates one task finds while a dataset's labels are placed on an executor.
+CANDIDATE_BATCH = 64
+
+
+def batch_candidates(
+    sources: Sequence[LabelSource], ladder: NDArray[np.float64], latitude: float, max_zoom: float, style: LabelStyle
+) -> list[Candidates]:
+    """:func:`contour_candidates` of each source: a task a worker runs (each contour's candidates are its own,
+    so finding them is the part of the placement that can be shared out)."""
+    return [contour_candidates(src, ladder, latitude, max_zoom, style) for src in sources]
+
+
 def place_labels(
     sources: Iterable[LabelSource],
     ladder: NDArray[np.float64],
     latitude: float,
     max_zoom: float,
     style: LabelStyle | None = None,
+    executor: Executor | None = None,
 ) -> LabelAnchors:
     """Anchors of every labelled contour of a dataset, none overlapping another at their first common zoom.
 
@@ -273,12 +293,27 @@ def place_labels(
         Degrees; zooms are turned into scales there.
     max_zoom
         The last zoom labels are shown at (the served maximum): drift is checked up to it.
+    executor
+        Where the contours' candidates are found, :data:`CANDIDATE_BATCH` contours a task (see
+        :mod:`engine.parallel`); None = in this process. The placement among them runs here.
     """
     style = style or LabelStyle()
     pts, ang, score, zoom, owner = [], [], [], [], []
     fids, elevations, ranks, labels = [], [], [], []  # of each source
-    for k, src in enumerate(sources):
-        p, a, sc, fz = contour_candidates(src, ladder, latitude, max_zoom, style)
+    sent: deque[list[LabelSource]] = deque()  # the batches whose candidates are being found, in order
+
+    def tasks() -> Iterator[tuple[object, ...]]:
+        it = iter(sources)
+        while batch := list(islice(it, CANDIDATE_BATCH)):
+            sent.append(batch)
+            yield batch, ladder, latitude, max_zoom, style
+
+    found = (
+        (src, cands)
+        for batch_found in map_ordered(executor, batch_candidates, tasks())
+        for src, cands in zip(sent.popleft(), batch_found, strict=True)
+    )
+    for k, (src, (p, a, sc, fz)) in enumerate(found):
         pts.append(p)
         ang.append(a)
         score.append(sc)

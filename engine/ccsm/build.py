@@ -19,7 +19,7 @@ from threadpoolctl import threadpool_limits
 from engine.ccsm.blocks import PieceIndex, find_crossings_by_block, input_touches
 from engine.ccsm.ccs import CCS, build_ccs, check_contour, slice_area
 from engine.ccsm.regression import ScaleModel, fit_scale_model
-from engine.ccsm.spool import MemorySpool, Spool, in_batches
+from engine.ccsm.spool import MemorySpool, Spool
 from engine.errors import CCSMError
 from engine.geom.polyline import ring_areas
 from engine.heap import keep_big_buffers_out_of_the_heap, release_free_memory
@@ -68,9 +68,9 @@ class BuiltSet:
     repaired: int = 0
     inputs: Sequence[Contour] = ()
 
-    def surfaces_in_batches(self, size: int) -> Iterator[tuple[list[CCS], list[Contour]]]:
+    def payloads_in_batches(self, size: int) -> Iterator[tuple[list[CCS], list[Contour]]]:
         """The surfaces in input order with their input contours, ``size`` at a time (as
-        :meth:`SpooledSet.surfaces_in_batches`)."""
+        :meth:`SpooledSet.payloads_in_batches`; a surface in memory is its own payload)."""
         for i in range(0, len(self.surfaces), size):
             yield self.surfaces[i : i + size], list(self.inputs[i : i + size])
 
@@ -155,11 +155,13 @@ class SpooledSet:
     interval: float | None
     repaired: int
 
-    def surfaces_in_batches(self, size: int) -> Iterator[tuple[list[CCS], list[Contour]]]:
-        """The surfaces in input order with their input contours, ``size`` at a time (only one batch of each
-        is read into memory)."""
-        for start, surfaces in zip(range(0, self.count, size), in_batches(self.spool, self.count, size), strict=True):
-            yield surfaces, list(self.inputs[start : start + size])
+    def payloads_in_batches(self, size: int) -> Iterator[tuple[Sequence[CCS | bytes], list[Contour]]]:
+        """The surfaces in input order as the spool keeps them (:meth:`Spool.get_payloads`, sent to a worker
+        without this process opening them) with their input contours, ``size`` at a time (only one batch of
+        each is read into memory)."""
+        for start in range(0, self.count, size):
+            stop = min(self.count, start + size)
+            yield self.spool.get_payloads(range(start, stop)), list(self.inputs[start:stop])
 
 
 def build_contour_set(

@@ -9,7 +9,7 @@ and the store is written batch by batch from the spool. The method only knows th
 from __future__ import annotations
 
 import pickle
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Sequence
 from typing import Protocol
 
 from engine.ccsm.ccs import CCS
@@ -60,8 +60,3 @@ def surface_of(payload: CCS | bytes) -> CCS:
     """A surface from what :meth:`Spool.get_payloads` gave (a pickle from a spool on disk)."""
     return pickle.loads(payload) if isinstance(payload, bytes) else payload
 
-
-def in_batches(spool: Spool, count: int, size: int) -> Iterator[list[CCS]]:
-    """Surfaces 0 .. count - 1 of ``spool``, ``size`` at a time, in order."""
-    for start in range(0, count, size):
-        yield spool.get(range(start, min(count, start + size)))

@@ -8,6 +8,8 @@ new rows' fids are known) and a tile only reads the result.
 
 from __future__ import annotations
 
+from concurrent.futures import Executor
+
 import numpy as np
 
 from engine.cartography.dataset import dataset_cartography, label_sources
@@ -26,8 +28,11 @@ def label_last_zoom(max_zoom: int) -> float:
     return float(max_zoom) + 1
 
 
-def place_dataset_labels(store: CCSStore, dataset: str, max_zoom: int) -> StoredLabels:
-    """Place the labels of the dataset's version as the store holds it, for tiles up to ``max_zoom``.
+def place_dataset_labels(
+    store: CCSStore, dataset: str, max_zoom: int, executor: Executor | None = None
+) -> StoredLabels:
+    """Place the labels of the dataset's version as the store holds it, for tiles up to ``max_zoom``; the
+    contours' candidates are found on ``executor`` (None: in this process, see :func:`place_labels`).
 
     Raises
     ------
@@ -42,13 +47,16 @@ def place_dataset_labels(store: CCSStore, dataset: str, max_zoom: int) -> Stored
     batches = (store.load(fids[k : k + LABEL_BATCH]) for k in range(0, len(fids), LABEL_BATCH))
     sources = (src for records in batches for src in label_sources(carto, records))
     last_zoom = label_last_zoom(max_zoom)
-    anchors = place_labels(sources, info.ladder, carto.latitude, last_zoom)
+    anchors = place_labels(sources, info.ladder, carto.latitude, last_zoom, executor=executor)
     return stored_labels(anchors, info.data_version, last_zoom)
 
 
-def label_placer(store: CCSStore, dataset: str, max_zoom: int = DEFAULT_MAX_ZOOM) -> LabelPlacer:
-    """What :meth:`CCSStore.save` calls to place the labels of the version it writes."""
-    return lambda: place_dataset_labels(store, dataset, max_zoom)
+def label_placer(
+    store: CCSStore, dataset: str, max_zoom: int = DEFAULT_MAX_ZOOM, executor: Executor | None = None
+) -> LabelPlacer:
+    """What :meth:`CCSStore.save` calls to place the labels of the version it writes (the candidates found on
+    ``executor``, as the build's other work)."""
+    return lambda: place_dataset_labels(store, dataset, max_zoom, executor)
 
 
 def stored_labels(anchors: LabelAnchors, data_version: int, last_zoom: float) -> StoredLabels:

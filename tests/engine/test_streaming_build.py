@@ -7,19 +7,20 @@ import os
 import subprocess
 import sys
 import threading
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Executor, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
+from synthetic_rasters import fractal_heights, write_geotiff
 
 import engine.ccsm.blocks as blocks
 import engine.serve.datasets as datasets
 from engine.ccsm.build import build_contour_set, build_into
 from engine.ccsm.spool import MemorySpool
 from engine.errors import StoreError
-from engine.parallel import map_ordered
+from engine.parallel import local_pool, map_ordered
 from engine.params import BuildParams
 from engine.scratch import SCRATCH_PREFIX, host_name, remove_stale_scratch
 from engine.serve.datasets import SourceSpec, build_dataset
@@ -131,6 +132,38 @@ def test_a_store_build_through_the_scratch_file_writes_the_rows_of_an_in_memory_
     build_dataset(store, SourceSpec(clusters_source, "m", "m"), workers=1)
     assert stored_rows(store, "m") == streamed
     assert not list(tmp_path.glob(f"{SCRATCH_PREFIX}*"))  # the scratch file went with its build
+
+
+class RecordingExecutor(Executor):
+    """Another executor, with the name of every function submitted to it recorded."""
+
+    def __init__(self, inner: Executor) -> None:
+        self.inner = inner
+        self.ran: list[str] = []
+
+    def submit(self, fn, /, *args, **kwargs):  # noqa: ANN001, ANN002, ANN003, ANN201 - Executor's
+        self.ran.append(fn.__name__)
+        return self.inner.submit(fn, *args, **kwargs)
+
+
+def test_rows_and_label_candidates_made_on_an_executor_are_stored_as_made_in_the_build_process(tmp_path) -> None:
+    z = fractal_heights(11, 3.0, n=64, relief_m=200.0).astype(np.float32)
+    dem = write_geotiff(tmp_path / "t.tif", z, west=740_000.0, north=4_060_000.0, cell=30.0, crs="EPSG:32616")
+    spec = SourceSpec(dem, "t", "t", interval=10.0)
+    here = CCSStore(tmp_path / "here.sqlite")
+    build_dataset(here, spec, workers=1)
+    pooled = CCSStore(tmp_path / "pool.sqlite")
+    with local_pool(2) as pool:
+        executor = RecordingExecutor(pool)
+        build_dataset(pooled, spec, executor=executor)
+    # The worker processes made the rows and found the labels' candidates, several tasks of each.
+    assert executor.ran.count("batch_rows") > 1 and executor.ran.count("batch_candidates") > 1, executor.ran
+    assert stored_rows(pooled, "t") == stored_rows(here, "t")
+    mine, theirs = here.labels("t"), pooled.labels("t")
+    assert mine is not None and theirs is not None and len(mine.fid) > 10
+    for column in ("xy", "angle", "min_zoom", "fid", "rank", "elevation", "box_px"):
+        assert_array_equal(getattr(theirs, column), getattr(mine, column))
+    assert theirs.text == mine.text
 
 
 def test_a_failing_build_removes_its_scratch_file_and_keeps_the_stored_version(
