@@ -31,6 +31,7 @@ from engine.serve.labels import DEFAULT_MAX_ZOOM, label_anchors, label_last_zoom
 from engine.serve.methods import Method, TileContext, TileLines, make_methods
 from engine.serve.pack import PACK_BYTES_PER_VERTEX, DatasetPack
 from engine.serve.pieces import pack_of_pieces
+from engine.serve.point_grid import PointGrid
 from engine.store.sqlite import CCSStore, ContourRecord, DatasetInfo
 from engine.tiles.clip import clip_lines_exact, clip_lines_fast
 from engine.tiles.crossings import lines_cross_in_grid
@@ -125,7 +126,7 @@ class Renderer:
         self._info: dict[str, tuple[DatasetInfo, float | None]] = {}
         self._packs: dict[str, DatasetPack] = {}
         self._cartography: dict[str, tuple[int, DatasetCartography]] = {}
-        self._labels: dict[str, tuple[int, LabelAnchors]] = {}
+        self._labels: dict[str, tuple[int, LabelAnchors, PointGrid]] = {}
         self._labels_lock = threading.Lock()  # placing a dataset's labels takes seconds: once, not per request
         self._pack_lock = threading.Lock()
 
@@ -211,8 +212,12 @@ class Renderer:
         return part, np.arange(len(part.fid))
 
     def labels(self, dataset: str) -> LabelAnchors:
-        """The dataset's label anchors on index contours (docs/design.md section 9.3): those the build stored
-        with the data version, read once per version.
+        """The dataset's label anchors on index contours (docs/design.md section 9.3)."""
+        return self.indexed_labels(dataset)[0]
+
+    def indexed_labels(self, dataset: str) -> tuple[LabelAnchors, PointGrid]:
+        """The dataset's label anchors and a grid over them: those the build stored with the data version, read
+        once per version.
 
         A version stored without them, or placed for another served zoom range, has them placed here instead,
         once per data version (a minute or more for a large dataset).
@@ -220,36 +225,42 @@ class Renderer:
         info, _ = self.info(dataset)
         cached = self._labels.get(dataset)
         if cached is not None and cached[0] == info.data_version:
-            return cached[1]
+            return cached[1], cached[2]
         last_zoom = label_last_zoom(self.options.max_zoom)
         stored = self.store.labels(dataset)
         if stored is not None and stored.data_version == info.data_version and stored.last_zoom == last_zoom:
             anchors = label_anchors(stored)
-            self._labels[dataset] = (stored.data_version, anchors)
-            return anchors
+            grid = PointGrid.of(anchors.xy)
+            self._labels[dataset] = (stored.data_version, anchors, grid)
+            return anchors, grid
         with self._labels_lock:
             cached = self._labels.get(dataset)
             if cached is not None and cached[0] == info.data_version:
-                return cached[1]
+                return cached[1], cached[2]
             placed = place_dataset_labels(self.store, dataset, self.options.max_zoom)
             anchors = label_anchors(placed)
-            self._labels[dataset] = (placed.data_version, anchors)
-        return anchors
+            grid = PointGrid.of(anchors.xy)
+            self._labels[dataset] = (placed.data_version, anchors, grid)
+        return anchors, grid
 
     def label_layer(self, dataset: str, tile: Tile) -> bytes:
         """The ``contour_labels`` layer of a tile: labels shown somewhere in [z, z + 1) whose anchor lies in
         the tile (each label in exactly one tile per zoom); b"" when none."""
-        labels = self.labels(dataset)
+        labels, grid = self.indexed_labels(dataset)
         if len(labels) == 0:
             return b""
         b = tile_bounds(tile)
         extent = self.options.extent
-        gx = np.floor((labels.xy[:, 0] - b.minx) / (b.maxx - b.minx) * extent).astype(np.int64)
-        gy = np.floor((b.maxy - labels.xy[:, 1]) / (b.maxy - b.miny) * extent).astype(np.int64)
-        inside = (gx >= 0) & (gx < extent) & (gy >= 0) & (gy < extent) & (labels.min_zoom < tile.z + 1)
+        # Only the anchors near the tile are tested (one grid unit around it: rounding cannot reach further).
+        mx, my = (b.maxx - b.minx) / extent, (b.maxy - b.miny) / extent
+        near = grid.near(b.minx - mx, b.miny - my, b.maxx + mx, b.maxy + my)
+        xy = labels.xy[near]
+        gx = np.floor((xy[:, 0] - b.minx) / (b.maxx - b.minx) * extent).astype(np.int64)
+        gy = np.floor((b.maxy - xy[:, 1]) / (b.maxy - b.miny) * extent).astype(np.int64)
+        inside = (gx >= 0) & (gx < extent) & (gy >= 0) & (gy < extent) & (labels.min_zoom[near] < tile.z + 1)
         if not inside.any():
             return b""
-        chosen = labels.select(inside)
+        chosen = labels.select(near[inside])
         columns = label_columns(self.cartography(dataset), chosen)
         pts = np.column_stack([gx[inside], gy[inside]])
         return encode_point_tile(LABEL_LAYER, chosen.fid.tolist(), columns, pts, extent)
