@@ -63,6 +63,12 @@ def instrument(spent: dict[str, float]) -> None:
     store.dataset = timed("info", store.dataset)  # type: ignore[method-assign]
     store.query = timed("query", store.query)  # type: ignore[method-assign]
     store.load_heads = timed("heads", store.load_heads)  # type: ignore[method-assign]
+    try:
+        import engine.serve.heads as heads
+
+        heads.DatasetHeads.of = timed("heads", heads.DatasetHeads.of)  # type: ignore[method-assign]
+    except ImportError:  # a checkout without the head memory
+        pass
     if hasattr(store, "pieces_meeting"):
         store.pieces_meeting = timed("pieces sql", store.pieces_meeting)  # type: ignore[method-assign]
     sqlite._column = timed("pieces decode", sqlite._column)

@@ -855,6 +855,21 @@ class CCSStore:
                 out[r[0]] = ContourHead(r[0], float(r[1]), vanish, _array(r[3]))
         return [out[f] for f in fids if f in out]
 
+    def dataset_heads(
+        self, dataset: str
+    ) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """The per-contour columns of every contour of a dataset, in fid order, as arrays: fid, elevation,
+        vanishing scale (inf: never vanishes) and the (n, S) t tables."""
+        rows = self._con().execute(
+            "SELECT fid, elevation, vanish_scale, t_at_scale FROM contours WHERE dataset=? ORDER BY fid", (dataset,)
+        ).fetchall()
+        fid = np.array([r[0] for r in rows], dtype=np.int64)
+        elevation = np.array([r[1] for r in rows], dtype=np.float64)
+        vanish = np.array([math.inf if r[2] is None else r[2] for r in rows], dtype=np.float64)
+        width = len(rows[0][3]) // 8 if rows else 1
+        tables = np.frombuffer(b"".join([r[3] for r in rows]), dtype="<f8").reshape(len(rows), width)
+        return fid, elevation, vanish, tables.astype(np.float64)
+
     def all_fids(self, dataset: str) -> list[int]:
         """Every contour fid of a dataset, in input order."""
         return [
