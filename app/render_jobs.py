@@ -62,6 +62,7 @@ class RenderConfig:
     wm_max_vertices: int
     morph_cache_bytes: int = 0
     head_cache_bytes: int = DEFAULT_HEAD_CACHE_BYTES
+    store_mmap_bytes: int = 0
 
 
 @dataclass(frozen=True)
@@ -167,7 +168,7 @@ def morph_tile_cost(rendered: Rendered) -> int:
 def make_renderer(config: RenderConfig, store_path: Path | None = None) -> Renderer:
     """The worker's own store connection and renderer (caches are per worker)."""
     return Renderer(
-        CCSStore(store_path or config.store_path),
+        CCSStore(store_path or config.store_path, mmap_bytes=config.store_mmap_bytes),
         config.tile,
         contour_cache_bytes=config.contour_cache_bytes,
         head_cache_bytes=config.head_cache_bytes,

@@ -342,6 +342,7 @@ def render_config_for(settings: Settings) -> RenderConfig:
         wm_max_vertices=settings.wm_max_vertices,
         morph_cache_bytes=settings.morph_cache_mb << 20,
         head_cache_bytes=settings.head_cache_mb << 20,
+        store_mmap_bytes=settings.store_mmap_mb << 20,
     )
 
 

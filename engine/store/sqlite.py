@@ -452,6 +452,10 @@ class CCSStore:
         The file; created (with its directory) if missing.
     readonly
         Open without creating or migrating (for a second process that only reads).
+    mmap_bytes
+        Read up to this much of the file through memory mapping (SQLite's ``mmap_size``; 0: SQLite's default,
+        none). A serving process reads the stored pieces of a large dataset this way without copying each
+        page into its own cache: the mapped pages are the system's shared file cache, not the process's memory.
 
     Raises
     ------
@@ -459,9 +463,10 @@ class CCSStore:
         The file is not a ccsm store, is of another format, or cannot be opened.
     """
 
-    def __init__(self, path: str | os.PathLike[str], *, readonly: bool = False) -> None:
+    def __init__(self, path: str | os.PathLike[str], *, readonly: bool = False, mmap_bytes: int = 0) -> None:
         self.path = Path(path)
         self.readonly = readonly
+        self.mmap_bytes = int(mmap_bytes)
         self._local = threading.local()
         self._lock = threading.Lock()
         if not readonly:
@@ -497,6 +502,8 @@ class CCSStore:
             # last commit, never corrupt the file.
             con.execute("PRAGMA synchronous=NORMAL")
             con.execute("PRAGMA busy_timeout=60000")
+            if self.mmap_bytes:
+                con.execute(f"PRAGMA mmap_size={self.mmap_bytes}")
             self._local.con = con
         return con
 

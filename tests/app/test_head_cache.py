@@ -4,11 +4,13 @@
 Tiles drawn with the heads held are those drawn reading them per tile; a rebuilt dataset (a new data version,
 new fids) has its new heads read and drawn; a worker on another store file (replicas switch files; a fresh
 store numbers its contours and versions from 1 again) never draws with the first store's heads.
+A worker reads its store through memory mapping when configured to (``CCSM_STORE_MMAP_MB``).
 """
 
 from __future__ import annotations
 
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -119,3 +121,11 @@ def test_heads_held_of_an_older_version_give_new_contours_their_stored_heads(sto
     got = old.of(now, fids)
     assert got.fid.tolist() == fids
     assert np.array_equal(got.tables, np.stack([h.t_at_scale for h in now.load_heads(fids)]))
+
+
+def test_a_render_worker_reads_its_store_through_the_configured_memory_map(store: Path) -> None:
+    worker = Worker.of(replace(config(store), store_mmap_bytes=256 << 20))
+    assert worker.renderer.store._con().execute("PRAGMA mmap_size").fetchone()[0] == 256 << 20
+    assert drawn(worker) == packed(store)
+    plain = Worker.of(config(store))
+    assert plain.renderer.store._con().execute("PRAGMA mmap_size").fetchone()[0] == 0
