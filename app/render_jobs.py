@@ -20,6 +20,7 @@ from app.compression import gzip_body, worth_compressing
 from engine.errors import CCSMError, UnknownLayer
 from engine.parallel import lower_priority as lower_process_priority
 from engine.serve.cache import LRUCache
+from engine.serve.heads import DEFAULT_HEAD_CACHE_BYTES
 from engine.serve.relief import ReliefCache
 from engine.serve.renderer import Renderer, TileOptions
 from engine.serve.simplify import feature_collection
@@ -60,6 +61,8 @@ class RenderConfig:
     baseline_cache_entries: int
     wm_max_vertices: int
     morph_cache_bytes: int = 0
+    head_cache_bytes: int = DEFAULT_HEAD_CACHE_BYTES
+    store_mmap_bytes: int = 0
 
 
 @dataclass(frozen=True)
@@ -165,9 +168,10 @@ def morph_tile_cost(rendered: Rendered) -> int:
 def make_renderer(config: RenderConfig, store_path: Path | None = None) -> Renderer:
     """The worker's own store connection and renderer (caches are per worker)."""
     return Renderer(
-        CCSStore(store_path or config.store_path),
+        CCSStore(store_path or config.store_path, mmap_bytes=config.store_mmap_bytes),
         config.tile,
         contour_cache_bytes=config.contour_cache_bytes,
+        head_cache_bytes=config.head_cache_bytes,
         baseline_cache_entries=config.baseline_cache_entries,
         baseline_max_vertices={"wm": config.wm_max_vertices},
     )
@@ -222,12 +226,13 @@ def draw_hillshade(worker: Worker, job: HillshadeJob) -> bytes | None:
 
 
 def warm(renderer: Renderer) -> None:
-    """Pack every stored dataset and read its labels now (placing them only for a version stored without them),
-    so that cost (seconds on a large dataset) is paid before the worker takes its first request, not inside one
-    request's deadline."""
+    """Pack every stored dataset (or read its contour heads, when it is too large to pack) and read its labels
+    now (placing them only for a version stored without them), so that cost (seconds on a large dataset) is paid
+    before the worker takes its first request, not inside one request's deadline."""
     for dataset in renderer.store.dataset_ids():
         try:
-            renderer.pack(dataset)
+            if renderer.pack(dataset) is None:
+                renderer.heads(dataset)  # too large to hold whole: its heads instead, when they fit
             renderer.labels(dataset)  # the build stored them: read once per data version
         except Exception:  # a dataset that cannot be packed fails in its own requests, with its own error
             log.warning("render worker: could not pack %s ahead of use", dataset, exc_info=True)

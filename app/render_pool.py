@@ -341,6 +341,8 @@ def render_config_for(settings: Settings) -> RenderConfig:
         baseline_cache_entries=settings.baseline_cache_entries,
         wm_max_vertices=settings.wm_max_vertices,
         morph_cache_bytes=settings.morph_cache_mb << 20,
+        head_cache_bytes=settings.head_cache_mb << 20,
+        store_mmap_bytes=settings.store_mmap_mb << 20,
     )
 
 

@@ -175,6 +175,7 @@ class DatasetService:
                 max_zoom=settings.max_zoom,
             ),
             contour_cache_bytes=settings.contour_cache_mb << 20,
+            head_cache_bytes=settings.head_cache_mb << 20,
             baseline_cache_entries=settings.baseline_cache_entries,
         )
         self.specs = specs_from_settings(settings)

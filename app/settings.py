@@ -81,6 +81,18 @@ class Settings(BaseSettings):
     contour_cache_mb: int = Field(
         512, ge=1, description="Memory for decoded contours per worker process, MB."
     )
+    head_cache_mb: int = Field(
+        128,
+        ge=0,
+        description="Memory per worker process for the contour heads (t tables) of datasets too large to hold "
+        "whole, MB: 8 x (ladder + 3) bytes per contour, 55 MB for 193,000 contours; 0: read per tile.",
+    )
+    store_mmap_mb: int = Field(
+        4096,
+        ge=0,
+        description="Store file read through memory mapping by each render worker, MB (SQLite mmap_size): shared "
+        "file cache, not the worker's own memory; 0: none.",
+    )
     baseline_cache_entries: int = Field(
         100_000, ge=1, description="Cached DP/VW/WM results per worker process."
     )

@@ -13,7 +13,7 @@ Series
 ``short``  thousands of small hills: rings of a few dozen vertices, the costliest contours per vertex.
 
 Usage: python bench/bench_scale.py [--sizes 1,4,16] [--workers 2] [--series sample,grid,dense,short] [--cache-mb MB]
-       python bench/bench_scale.py --tiles STORE[,STORE...] [--cache-mb MB[,MB...]]   (tile times only)
+       python bench/bench_scale.py --tiles STORE[,STORE...] [--cache-mb MB[,MB...]] [--mmap-mb MB]   (tile times only)
 (each build runs once; on a loaded 2-core machine 4× takes about ten minutes, 16× far longer)
 """
 
@@ -170,16 +170,19 @@ def tile_times(store_path: Path, n: int = 120, cache_mb: float | None = None) ->
     return float(np.percentile(times, 50)), float(np.percentile(times, 95))
 
 
-def tile_run(store_path: Path, n: int = 120, cache_mb: float | None = None) -> dict[str, np.ndarray]:
+def tile_run(
+    store_path: Path, n: int = 120, cache_mb: float | None = None, mmap_mb: float = 0.0
+) -> dict[str, np.ndarray]:
     """Wall and CPU milliseconds of each of ``n`` distinct z12-z14 tiles of the store's first dataset, in the
     order rendered by one new renderer (the first tile is the first request of the data version: it pays for
-    what a renderer does once per version, e.g. reading the label anchors)."""
+    what a renderer does once per version, e.g. reading the label anchors), its store read through ``mmap_mb``
+    of memory mapping (as a render worker's, CCSM_STORE_MMAP_MB; 0: none)."""
     from engine.serve.renderer import Renderer
     from engine.store.sqlite import CCSStore
     from engine.tiles.grid import tiles_covering
     from engine.types import Bounds
 
-    store = CCSStore(store_path, readonly=True)
+    store = CCSStore(store_path, readonly=True, mmap_bytes=int(mmap_mb * 2**20))
     dataset = store.dataset_ids()[0]
     info = store.dataset(dataset)
     tiles = [t for z in (12, 13, 14) for t in tiles_covering(Bounds(*info.bounds_3857), z)]
@@ -196,12 +199,12 @@ def tile_run(store_path: Path, n: int = 120, cache_mb: float | None = None) -> d
     return {"wall_ms": np.array(wall) * 1000, "cpu_ms": np.array(cpu) * 1000}
 
 
-def print_tile_runs(stores: list[Path], cache_mb: list[float | None]) -> None:
+def print_tile_runs(stores: list[Path], cache_mb: list[float | None], mmap_mb: float = 0.0) -> None:
     """Tile times of existing stores (no build), one line per store: first tile, then p50 / p95 of the
     others, wall and CPU."""
     print(f"{'store':28} {'cache MB':>8} {'first s':>8} {'p50 ms':>7} {'p95 ms':>7} {'cpu p50':>7} {'cpu p95':>7}")
     for path, mb in zip(stores, cache_mb, strict=True):
-        r = tile_run(path, cache_mb=mb)
+        r = tile_run(path, cache_mb=mb, mmap_mb=mmap_mb)
         wall, cpu = r["wall_ms"][1:], r["cpu_ms"][1:]
         print(
             f"{path.name:28} {'default' if mb is None else f'{mb:g}':>8} {r['wall_ms'][0] / 1000:8.2f} "
@@ -239,6 +242,9 @@ def main() -> None:
         "--tiles",
         help="Time the tiles of existing stores (comma-separated paths) instead of building; no build.",
     )
+    parser.add_argument(
+        "--mmap-mb", type=float, default=0.0, help="With --tiles: the store read through memory mapping (MB; 0: none)."
+    )
     parser.add_argument("--one", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--interval", type=float, default=20.0, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -248,7 +254,7 @@ def main() -> None:
         return
     if args.tiles:
         stores = [Path(p) for p in args.tiles.split(",")]
-        print_tile_runs(stores, cache_mb if len(cache_mb) == len(stores) else cache_mb[:1] * len(stores))
+        print_tile_runs(stores, cache_mb if len(cache_mb) == len(stores) else cache_mb[:1] * len(stores), args.mmap_mb)
         return
     sizes = [int(s) for s in args.sizes.split(",")]
     print(

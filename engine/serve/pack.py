@@ -105,6 +105,51 @@ class ContourColumns(Protocol):
 
 
 @dataclass(frozen=True)
+class HeadColumns:
+    """Per-contour columns of some contours, in fid order (what a pack holds of each contour besides its rows).
+
+    Attributes
+    ----------
+    fid, elevation, vanish
+        (n,) feature ids (ascending), heights and vanishing scales (inf: never vanishes).
+    tables
+        (n, S) t at each scale of the dataset's ladder.
+    """
+
+    fid: NDArray[np.int64]
+    elevation: NDArray[np.float64]
+    vanish: NDArray[np.float64]
+    tables: NDArray[np.float64]
+
+    @classmethod
+    def of(cls, heads: Sequence[ContourColumns]) -> HeadColumns:
+        """The columns of contours (in fid order)."""
+        return cls(
+            np.array([h.fid for h in heads], dtype=np.int64),
+            np.array([float(h.elevation) for h in heads], dtype=np.float64),
+            np.array([h.vanish_scale for h in heads], dtype=np.float64),
+            np.stack([h.t_at_scale for h in heads]) if heads else np.zeros((0, 1)),
+        )
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held."""
+        return int(self.fid.nbytes + self.elevation.nbytes + self.vanish.nbytes + self.tables.nbytes)
+
+    def take(self, pos: NDArray[np.intp]) -> HeadColumns:
+        """The heads at positions ``pos``."""
+        return HeadColumns(self.fid[pos], self.elevation[pos], self.vanish[pos], self.tables[pos])
+
+    def locate(self, fids: Sequence[int] | NDArray[np.int64]) -> NDArray[np.intp] | None:
+        """Positions of ``fids`` (sorted); None when one of them is not here (a version written since)."""
+        f = np.asarray(fids, dtype=np.int64)
+        if len(self.fid) == 0:
+            return None if len(f) else np.zeros(0, dtype=np.intp)
+        pos = np.minimum(np.searchsorted(self.fid, f), len(self.fid) - 1)
+        return pos if bool((self.fid[pos] == f).all()) else None
+
+
+@dataclass(frozen=True)
 class CCSRows:
     """A contour's CCS rows (or a stretch of them) and their significance: together, and of ``top`` alone."""
 
@@ -168,29 +213,22 @@ class DatasetPack:
             orig_sig = np.concatenate([o.sig for o in original]).astype(np.float32)
         ccs_lines = LineSet.of(base, top, [len(c.base) for c in ccs], ccs_sig)
         original_lines = LineSet.of(orig, orig, [len(o.rows) for o in original], orig_sig)
-        return cls.of_lines(data_version, heads, ccs_lines, original_lines, interval)
+        return cls.of_lines(data_version, HeadColumns.of(heads), ccs_lines, original_lines, interval)
 
     @classmethod
     def of_lines(
         cls,
         data_version: int,
-        heads: Sequence[ContourColumns],
+        heads: HeadColumns,
         ccs: LineSet,
         original: LineSet,
         interval: float | None,
     ) -> DatasetPack:
         """Pack contours (in fid order) from their columns and their two line sets (one line per contour)."""
-        elevation = np.array([float(h.elevation) for h in heads])
-        index_of = {e: is_index(e, interval) for e in set(elevation.tolist())}
+        values, inverse = np.unique(heads.elevation, return_inverse=True)
+        index_of = np.array([is_index(float(e), interval) for e in values], dtype=bool)
         return cls(
-            data_version,
-            np.array([h.fid for h in heads], dtype=np.int64),
-            np.array([h.vanish_scale for h in heads], dtype=np.float64),
-            elevation,
-            np.array([index_of[e] for e in elevation.tolist()], dtype=bool),
-            np.stack([h.t_at_scale for h in heads]) if heads else np.zeros((0, 1)),
-            ccs,
-            original,
+            data_version, heads.fid, heads.vanish, heads.elevation, index_of[inverse], heads.tables, ccs, original
         )
 
     @property

@@ -7,18 +7,20 @@ line. A piece starts on a chunk boundary of the whole line and ends on the next 
 line's chunks (their rows and boxes) are the whole line's chunks; where pieces were left out between two read
 ones, one chunk of filler rows (NaN, whose box meets nothing) keeps the runs apart and the chunks aligned. The
 tile thus meets the same chunks, slices the same runs of rows, and is byte for byte the tile of the whole lines.
-A contour the tile touches with none of its pieces (its box meets the tile, its rows do not) gets a stand-in
-line of filler that meets no box.
+The tile's contours are those with a piece that meets it: one whose box meets the tile while none of its
+pieces does would draw nothing there, so the pieces' R*Tree is the only one a tile asks. A contour without
+rows in its pack (the baselines draw from whole decoded contours) gets a stand-in line of filler that meets no
+box.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from engine.serve.heads import DatasetHeads, read_heads
 from engine.serve.pack import DatasetPack, LineSet
 from engine.store.sqlite import PIECE_KINDS, PIECE_ROWS, CCSStore, StoredPieces
 from engine.tiles.runs import CHUNK_ROWS, ranges
@@ -84,23 +86,29 @@ def _nowhere(kind: str) -> StoredPieces:
 def pack_of_pieces(
     store: CCSStore,
     dataset: str,
-    fids: Sequence[int],
     box: Bounds,
     data_version: int,
     interval: float | None,
     kind: str | None,
-) -> DatasetPack:
-    """The pack of contours ``fids`` (sorted) holding, of the rows of ``kind`` (``ccs``, ``original``, or None
-    for neither: a method that draws from whole decoded contours), only the pieces that meet ``box``."""
-    heads = store.load_heads(fids)
-    have = np.array([h.fid for h in heads], dtype=np.int64)
-    lines = {}
-    for each in PIECE_KINDS:
-        pieces = store.pieces_meeting(dataset, box, each) if each == kind else _nowhere(each)
-        lines[each] = joined(pieces, have)
+    heads: DatasetHeads | None = None,
+) -> DatasetPack | None:
+    """The pack of the contours whose rows of ``kind`` (``ccs`` or ``original``) meet ``box``, holding only the
+    pieces that do; for ``kind`` None (a method that draws from whole decoded contours), of the contours whose
+    box meets ``box``, holding none of their rows. None when there is no such contour.
+
+    A contour whose box meets ``box`` while none of its pieces does would draw nothing in the tile, so the
+    pieces' own R*Tree is the only one a tile of stored pieces asks. The contours' heads come from ``heads``
+    (the dataset's, held in memory) when given, else from the store.
+    """
+    read = {each: store.pieces_meeting(dataset, box, each) if each == kind else _nowhere(each) for each in PIECE_KINDS}
+    fids = store.query(dataset, box) if kind is None else np.unique(read[kind].fid).tolist()
+    if not fids:
+        return None
+    columns = read_heads(store, fids) if heads is None else heads.of(store, fids)
+    lines = {each: joined(pieces, columns.fid) for each, pieces in read.items()}
     (base, top, sig, sig_top), ccs_sizes = lines["ccs"]
     (original, sig_original), original_sizes = lines["original"]
     ccs = LineSet.of(base, top, ccs_sizes, np.column_stack([sig, sig_top]))
     return DatasetPack.of_lines(
-        data_version, heads, ccs, LineSet.of(original, original, original_sizes, sig_original), interval
+        data_version, columns, ccs, LineSet.of(original, original, original_sizes, sig_original), interval
     )

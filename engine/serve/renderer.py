@@ -27,10 +27,12 @@ from engine.ccsm.regression import t_at_scales
 from engine.checks import check_method, check_t
 from engine.intervals import infer_interval
 from engine.serve.cache import LRUCache
+from engine.serve.heads import DEFAULT_HEAD_CACHE_BYTES, DatasetHeads, head_bytes
 from engine.serve.labels import DEFAULT_MAX_ZOOM, label_anchors, label_last_zoom, place_dataset_labels
 from engine.serve.methods import Method, TileContext, TileLines, make_methods
 from engine.serve.pack import PACK_BYTES_PER_VERTEX, DatasetPack
 from engine.serve.pieces import pack_of_pieces
+from engine.serve.point_grid import PointGrid
 from engine.store.sqlite import CCSStore, ContourRecord, DatasetInfo
 from engine.tiles.clip import clip_lines_exact, clip_lines_fast
 from engine.tiles.crossings import lines_cross_in_grid
@@ -102,6 +104,9 @@ class Renderer:
         Tile grid and zoom range.
     contour_cache_bytes
         Memory for decoded contour rows and dataset packs.
+    head_cache_bytes
+        Memory for the contour heads of datasets too large to pack, all datasets together
+        (:mod:`engine.serve.heads`); a dataset whose heads do not fit reads each tile's from the store.
     baseline_cache_entries
         Number of baseline results kept.
     baseline_max_vertices
@@ -114,6 +119,7 @@ class Renderer:
         options: TileOptions | None = None,
         *,
         contour_cache_bytes: int = 512 << 20,
+        head_cache_bytes: int = DEFAULT_HEAD_CACHE_BYTES,
         baseline_cache_entries: int = 100_000,
         baseline_max_vertices: Mapping[str, int] | None = None,
     ) -> None:
@@ -122,10 +128,12 @@ class Renderer:
         self.methods: dict[str, Method] = make_methods(baseline_cache_entries, baseline_max_vertices)
         self.contours: LRUCache[int, ContourRecord] = LRUCache(contour_cache_bytes, lambda r: r.nbytes + 1024)
         self.contour_cache_bytes = contour_cache_bytes
+        self.head_cache_bytes = head_cache_bytes
+        self._heads: dict[str, DatasetHeads] = {}
         self._info: dict[str, tuple[DatasetInfo, float | None]] = {}
         self._packs: dict[str, DatasetPack] = {}
         self._cartography: dict[str, tuple[int, DatasetCartography]] = {}
-        self._labels: dict[str, tuple[int, LabelAnchors]] = {}
+        self._labels: dict[str, tuple[int, LabelAnchors, PointGrid]] = {}
         self._labels_lock = threading.Lock()  # placing a dataset's labels takes seconds: once, not per request
         self._pack_lock = threading.Lock()
 
@@ -151,6 +159,7 @@ class Renderer:
         """Drop cached metadata of a dataset (after a delete or rebuild; contour rows get new fids anyway)."""
         self._info.pop(dataset, None)
         self._packs.pop(dataset, None)
+        self._heads.pop(dataset, None)
         self._cartography.pop(dataset, None)
         self._labels.pop(dataset, None)
 
@@ -182,6 +191,25 @@ class Renderer:
                 self._packs[dataset] = pack
         return pack
 
+    def heads(self, dataset: str) -> DatasetHeads | None:
+        """Every contour head of the dataset's version (read once per data version), or None when they do not
+        fit in the head memory beside the other datasets' heads held."""
+        info, _ = self.info(dataset)
+        held = self._heads.get(dataset)
+        if held is not None and held.data_version == info.data_version:
+            return held
+        with self._pack_lock:
+            held = self._heads.pop(dataset, None)
+            if held is not None and held.data_version == info.data_version:
+                self._heads[dataset] = held  # read by another thread meanwhile
+                return held
+            others = sum(h.heads.nbytes for h in self._heads.values())
+            if others + head_bytes(info.n_contours, len(info.ladder)) > self.head_cache_bytes:
+                return None
+            held = DatasetHeads.read(self.store, dataset, info.data_version)
+            self._heads[dataset] = held
+        return held
+
     def records(self, fids: Sequence[int]) -> list[ContourRecord]:
         """Decoded contour rows, from the cache or the store, in the order given (unknown fids skipped)."""
         out: list[ContourRecord | None] = [self.contours.get(f) for f in fids]
@@ -193,26 +221,37 @@ class Renderer:
             out = [r if r is not None else loaded.get(f) for f, r in zip(fids, out, strict=True)]
         return [r for r in out if r is not None]
 
-    def packed(
-        self, dataset: str, fids: Sequence[int], box: Bounds, rows: str | None
-    ) -> tuple[DatasetPack, NDArray[np.intp]]:
-        """A pack holding ``fids`` and their positions in it: the dataset's pack, or one of just the pieces of
-        these contours' ``rows`` (``ccs``, ``original`` or None) that meet ``box`` (:mod:`engine.serve.pieces`)."""
+    def packed(self, dataset: str, box: Bounds, rows: str | None) -> tuple[DatasetPack, NDArray[np.intp]] | None:
+        """The contours a tile's buffered ``box`` meets, in a pack, and their positions in it; None when there
+        is none.
+
+        The pack is the dataset's, or one of just the pieces of the contours' ``rows`` (``ccs``, ``original``, or
+        None for the baselines, which draw from whole decoded contours) that meet ``box``
+        (:mod:`engine.serve.pieces`).
+        """
         pack = self.pack(dataset)
-        where = pack.locate(fids) if pack is not None else None
-        if pack is not None and where is None:  # the store changed under the pack: take the new version
-            self.forget(dataset)
-            pack = self.pack(dataset)
-            where = pack.locate(fids) if pack is not None else None
-        if pack is not None and where is not None:
-            return pack, where
+        if pack is not None:
+            fids = self.store.query(dataset, box)
+            if not fids:
+                return None
+            where = pack.locate(fids)
+            if where is None:  # the store changed under the pack: take the new version
+                self.forget(dataset)
+                pack = self.pack(dataset)
+                where = pack.locate(fids) if pack is not None else None
+            if pack is not None and where is not None:
+                return pack, where
         info, interval = self.info(dataset)
-        part = pack_of_pieces(self.store, dataset, fids, box, info.data_version, interval, rows)
-        return part, np.arange(len(part.fid))
+        part = pack_of_pieces(self.store, dataset, box, info.data_version, interval, rows, self.heads(dataset))
+        return None if part is None or len(part.fid) == 0 else (part, np.arange(len(part.fid)))
 
     def labels(self, dataset: str) -> LabelAnchors:
-        """The dataset's label anchors on index contours (docs/design.md section 9.3): those the build stored
-        with the data version, read once per version.
+        """The dataset's label anchors on index contours (docs/design.md section 9.3)."""
+        return self.indexed_labels(dataset)[0]
+
+    def indexed_labels(self, dataset: str) -> tuple[LabelAnchors, PointGrid]:
+        """The dataset's label anchors and a grid over them: those the build stored with the data version, read
+        once per version.
 
         A version stored without them, or placed for another served zoom range, has them placed here instead,
         once per data version (a minute or more for a large dataset).
@@ -220,36 +259,42 @@ class Renderer:
         info, _ = self.info(dataset)
         cached = self._labels.get(dataset)
         if cached is not None and cached[0] == info.data_version:
-            return cached[1]
+            return cached[1], cached[2]
         last_zoom = label_last_zoom(self.options.max_zoom)
         stored = self.store.labels(dataset)
         if stored is not None and stored.data_version == info.data_version and stored.last_zoom == last_zoom:
             anchors = label_anchors(stored)
-            self._labels[dataset] = (stored.data_version, anchors)
-            return anchors
+            grid = PointGrid.of(anchors.xy)
+            self._labels[dataset] = (stored.data_version, anchors, grid)
+            return anchors, grid
         with self._labels_lock:
             cached = self._labels.get(dataset)
             if cached is not None and cached[0] == info.data_version:
-                return cached[1]
+                return cached[1], cached[2]
             placed = place_dataset_labels(self.store, dataset, self.options.max_zoom)
             anchors = label_anchors(placed)
-            self._labels[dataset] = (placed.data_version, anchors)
-        return anchors
+            grid = PointGrid.of(anchors.xy)
+            self._labels[dataset] = (placed.data_version, anchors, grid)
+        return anchors, grid
 
     def label_layer(self, dataset: str, tile: Tile) -> bytes:
         """The ``contour_labels`` layer of a tile: labels shown somewhere in [z, z + 1) whose anchor lies in
         the tile (each label in exactly one tile per zoom); b"" when none."""
-        labels = self.labels(dataset)
+        labels, grid = self.indexed_labels(dataset)
         if len(labels) == 0:
             return b""
         b = tile_bounds(tile)
         extent = self.options.extent
-        gx = np.floor((labels.xy[:, 0] - b.minx) / (b.maxx - b.minx) * extent).astype(np.int64)
-        gy = np.floor((b.maxy - labels.xy[:, 1]) / (b.maxy - b.miny) * extent).astype(np.int64)
-        inside = (gx >= 0) & (gx < extent) & (gy >= 0) & (gy < extent) & (labels.min_zoom < tile.z + 1)
+        # Only the anchors near the tile are tested (one grid unit around it: rounding cannot reach further).
+        mx, my = (b.maxx - b.minx) / extent, (b.maxy - b.miny) / extent
+        near = grid.near(b.minx - mx, b.miny - my, b.maxx + mx, b.maxy + my)
+        xy = labels.xy[near]
+        gx = np.floor((xy[:, 0] - b.minx) / (b.maxx - b.minx) * extent).astype(np.int64)
+        gy = np.floor((b.maxy - xy[:, 1]) / (b.maxy - b.miny) * extent).astype(np.int64)
+        inside = (gx >= 0) & (gx < extent) & (gy >= 0) & (gy < extent) & (labels.min_zoom[near] < tile.z + 1)
         if not inside.any():
             return b""
-        chosen = labels.select(inside)
+        chosen = labels.select(near[inside])
         columns = label_columns(self.cartography(dataset), chosen)
         pts = np.column_stack([gx[inside], gy[inside]])
         return encode_point_tile(LABEL_LAYER, chosen.fid.tolist(), columns, pts, extent)
@@ -314,10 +359,10 @@ class Renderer:
         bounds = tile_bounds(tile)
         box = buffered(bounds, self.options.buffer_px, self.options.extent)
         scale = self.scale_of_tile(tile, zoomf)
-        fids = self.store.query(dataset, box)
-        if not fids:
+        packed = self.packed(dataset, box, how.stored_rows)
+        if packed is None:
             return TileResult(None, 0, zoomf, scale)
-        pack, where = self.packed(dataset, fids, box, how.stored_rows)
+        pack, where = packed
         carto = self.cartography(dataset)
         idx = how.visible(pack, where, scale)
         idx = idx[carto.shown_in_tile(pack.elevation[idx], z)]
@@ -356,10 +401,10 @@ class Renderer:
         box = buffered(bounds, opts.buffer_px, opts.extent)
         lat = max(-85.05, min(85.05, tile_center_latitude(tile)))
         scales = scale_for_zoom(z + np.arange(MORPH_T_SAMPLES + 1) / MORPH_T_SAMPLES, lat)
-        fids = self.store.query(dataset, box)
-        if not fids:
+        packed = self.packed(dataset, box, "ccs")
+        if packed is None:
             return TileResult(None, 0, float(z), float(scales[0]))
-        pack, where = self.packed(dataset, fids, box, "ccs")
+        pack, where = packed
         carto = self.cartography(dataset)
         idx = where[scales[-1] < pack.vanish[where]]  # drawn somewhere in the level: at its finest end
         idx = idx[carto.shown_in_tile(pack.elevation[idx], z)]

@@ -452,6 +452,10 @@ class CCSStore:
         The file; created (with its directory) if missing.
     readonly
         Open without creating or migrating (for a second process that only reads).
+    mmap_bytes
+        Read up to this much of the file through memory mapping (SQLite's ``mmap_size``; 0: SQLite's default,
+        none). A serving process reads the stored pieces of a large dataset this way without copying each
+        page into its own cache: the mapped pages are the system's shared file cache, not the process's memory.
 
     Raises
     ------
@@ -459,9 +463,10 @@ class CCSStore:
         The file is not a ccsm store, is of another format, or cannot be opened.
     """
 
-    def __init__(self, path: str | os.PathLike[str], *, readonly: bool = False) -> None:
+    def __init__(self, path: str | os.PathLike[str], *, readonly: bool = False, mmap_bytes: int = 0) -> None:
         self.path = Path(path)
         self.readonly = readonly
+        self.mmap_bytes = int(mmap_bytes)
         self._local = threading.local()
         self._lock = threading.Lock()
         if not readonly:
@@ -497,6 +502,8 @@ class CCSStore:
             # last commit, never corrupt the file.
             con.execute("PRAGMA synchronous=NORMAL")
             con.execute("PRAGMA busy_timeout=60000")
+            if self.mmap_bytes:
+                con.execute(f"PRAGMA mmap_size={self.mmap_bytes}")
             self._local.con = con
         return con
 
@@ -854,6 +861,21 @@ class CCSStore:
                 vanish = math.inf if r[2] is None else float(r[2])
                 out[r[0]] = ContourHead(r[0], float(r[1]), vanish, _array(r[3]))
         return [out[f] for f in fids if f in out]
+
+    def dataset_heads(
+        self, dataset: str
+    ) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """The per-contour columns of every contour of a dataset, in fid order, as arrays: fid, elevation,
+        vanishing scale (inf: never vanishes) and the (n, S) t tables."""
+        rows = self._con().execute(
+            "SELECT fid, elevation, vanish_scale, t_at_scale FROM contours WHERE dataset=? ORDER BY fid", (dataset,)
+        ).fetchall()
+        fid = np.array([r[0] for r in rows], dtype=np.int64)
+        elevation = np.array([r[1] for r in rows], dtype=np.float64)
+        vanish = np.array([math.inf if r[2] is None else r[2] for r in rows], dtype=np.float64)
+        width = len(rows[0][3]) // 8 if rows else 1
+        tables = np.frombuffer(b"".join([r[3] for r in rows]), dtype="<f8").reshape(len(rows), width)
+        return fid, elevation, vanish, tables.astype(np.float64)
 
     def all_fids(self, dataset: str) -> list[int]:
         """Every contour fid of a dataset, in input order."""
