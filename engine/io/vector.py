@@ -8,6 +8,7 @@ there), so a big file is never held whole; GeoJSON is read in one go (see :data:
 
 from __future__ import annotations
 
+import gc
 import json
 import math
 import os
@@ -53,9 +54,10 @@ VECTOR_SUFFIXES: tuple[str, ...] = (".geojson", ".json", ".gpkg", ".shp")
 #: index"), so batches would cost a pass each: 9 batches of a 100 MB file took 22 s against 3.4 s for one read.
 #: A GeoJSON file is therefore read in one go (GDAL does not hold its text, only the features read).
 SEEKABLE_SUFFIXES: tuple[str, ...] = (".gpkg", ".shp")
-#: Features in the first batch read from a seekable file; each next batch is sized from the vertices per
-#: feature read so far to hold about :data:`ASSEMBLE_BATCH_VERTICES` vertices.
-FIRST_READ_FEATURES = 1024
+#: Features in the first batch read from a seekable file, few since their size is not known yet (a long line
+#: has tens of thousands of vertices); each next batch is sized from the vertices per feature read so far to
+#: hold about :data:`ASSEMBLE_BATCH_VERTICES` vertices.
+FIRST_READ_FEATURES = 64
 
 #: shapely geometry type ids (``shapely.get_type_id``) that are lines.
 #: Largest latitude Web Mercator (EPSG:3857) covers: the edge of the square world; contours beyond cannot be
@@ -220,6 +222,9 @@ def _read_features(path: Path, layer: str, start: int, asked: int | None) -> _Fe
         meta, fids, wkb, fields = ogr_read(
             path, layer=layer, return_fids=True, skip_features=start, max_features=asked
         )
+    # pyogrio's read leaves a reference cycle (a closure over its chunk lists) that holds the features it read
+    # until the garbage collector comes by, which in a big process can take many reads: collect it now.
+    gc.collect(1)
     return _FeatureRead(meta, fids, wkb, list(fields), start, asked)
 
 
