@@ -563,3 +563,69 @@ def test_issue_12_a_source_assembled_in_small_batches_gives_the_contours_and_rea
     for a, b in zip(batched.contours, whole.contours, strict=True):
         assert (a.id, a.elevation, a.closed) == (b.id, b.elevation, b.closed)
         np.testing.assert_array_equal(a.coords, b.coords)
+
+
+def sample_lines(n: int) -> tuple[list[shapely.Geometry | None], list[float]]:
+    """The lines (lon/lat) and elevations of the bundled sample's first ``n`` features."""
+    from engine.io.source import sample_contours_path
+
+    features = json.loads(sample_contours_path().read_text())["features"][:n]
+    return [shapely.geometry.shape(f["geometry"]) for f in features], [f["properties"]["elevation"] for f in features]
+
+
+@pytest.mark.parametrize("suffix", [".gpkg", ".shp", ".geojson"])
+def test_issue_12_a_file_read_in_batches_gives_the_contour_set_of_one_read(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, suffix: str
+) -> None:
+    """GeoPackages and Shapefiles are read a few features at a time; the contours, their ids (FIDs, parts) and
+    the bad features with their reasons and order must be those of one read. GeoJSON is read in one go."""
+    import engine.io.vector as vector
+
+    geoms, elevations = sample_lines(240)
+    geoms[150] = shapely.LineString([(-84.1, 36.5), (190.0, 36.5)])  # a Shapefile cannot hold NaN
+    geoms[170] = None
+    elevations[190] = float("nan")
+    geoms[200] = shapely.MultiLineString([geoms[201], geoms[202]])
+    geoms[220] = shapely.LineString([(-84.1, 36.5), (-84.1, 95.0)])
+    path = write_vector(
+        tmp_path / f"c{suffix}",
+        geoms,
+        {"elevation": elevations},
+        crs="EPSG:4326",
+        geometry_type="MultiLineString" if suffix == ".shp" else "Unknown",
+    )
+    whole = read_source(path)
+    reads: list[int | None] = []
+    real_read = vector.ogr_read
+
+    def counted_read(*args: Any, **kwargs: Any) -> Any:
+        reads.append(kwargs["max_features"])
+        return real_read(*args, **kwargs)
+
+    monkeypatch.setattr(vector, "ogr_read", counted_read)
+    monkeypatch.setattr(vector, "FIRST_READ_FEATURES", 16)
+    monkeypatch.setattr(vector, "ASSEMBLE_BATCH_VERTICES", 1500)
+    batched = read_source(path)
+
+    if suffix == ".geojson":
+        assert reads == [None]  # a read past the first feature would parse the file again
+    else:
+        assert reads[0] == 16 and len(reads) > 5  # the bad features are in later reads
+    fid = 1 if suffix == ".gpkg" else 0  # the FID of the first feature
+    assert [(b.id, b.reason) for b in whole.bad_features] == [
+        (170 + fid, "no geometry"),
+        (190 + fid, "no elevation in field 'elevation'"),
+        (150 + fid, "coordinates out of range for EPSG:4326 (190, 36.5)"),
+        (220 + fid, "coordinates out of range for EPSG:4326 (-84.1, 95)"),
+    ]
+    assert batched.bad_features == whole.bad_features
+    assert f"{200 + fid}:1" in [c.id for c in whole.contours]
+    assert (batched.working_crs, batched.source_crs, batched.interval) == (
+        whole.working_crs,
+        whole.source_crs,
+        whole.interval,
+    )
+    assert len(batched.contours) == len(whole.contours) == 237
+    for a, b in zip(batched.contours, whole.contours, strict=True):
+        assert (a.id, a.elevation, a.closed) == (b.id, b.elevation, b.closed)
+        np.testing.assert_array_equal(a.coords, b.coords)

@@ -189,3 +189,37 @@ print(rss() - before)
         grown[mode] = int(out.stdout)
     assert grown["default"] >= 20, grown  # the probe shows the growth it guards against
     assert grown["tuned"] < 4, grown
+
+
+@pytest.mark.parametrize("suffix", [".gpkg", ".shp"])
+def test_issue_12_a_contour_file_read_in_batches_never_holds_its_lines_whole(tmp_path, monkeypatch, suffix) -> None:
+    """Through a scratch file, a GeoPackage or Shapefile read a batch of features at a time peaks at a fraction of
+    the Python and NumPy memory of one read of every feature (its WKB, geometries and coordinates)."""
+    import shapely
+    from pyogrio.raw import write
+
+    import engine.io.vector as vector
+
+    rng = np.random.default_rng(7)
+    n, k = 2000, 100  # lines of k vertices, wandering east of (WEST, NORTH)
+    steps = rng.normal(0.0, 20.0, (n, k, 2)).cumsum(axis=1)
+    starts = np.column_stack([WEST + 50.0 * np.arange(n), np.full(n, NORTH)])[:, None, :]
+    wkb = np.asarray(shapely.to_wkb(shapely.linestrings(starts + steps)), dtype=object)
+    path = tmp_path / f"lines{suffix}"
+    write(path, wkb, [np.full(n, 100.0)], ["ele"], crs="EPSG:32616", geometry_type="LineString")
+    monkeypatch.setattr(vector, "ASSEMBLE_BATCH_VERTICES", 10_000)
+
+    def peak() -> int:
+        scratch = ReadScratch(tmp_path)
+        tracemalloc.start()
+        try:
+            assert len(read_source(path, scratch=scratch).contours) == n
+            return tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+            scratch.close()
+
+    batched = peak()
+    monkeypatch.setattr(vector, "SEEKABLE_SUFFIXES", ())  # one read of every feature, as GeoJSON is read
+    whole = peak()
+    assert batched < whole / 4, f"peak {batched / 1e6:.1f} MB in batches against {whole / 1e6:.1f} MB whole"
