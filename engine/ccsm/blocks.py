@@ -22,9 +22,9 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import shapely
 from numpy.typing import NDArray
 
+from engine.ccsm.near import box_pairs
 from engine.ccsm.spool import Spool, surface_of
 from engine.ccsm.topology import InputTouches, concatenated_ranges, new_contact_pairs, per_piece, piece_ranges
 from engine.heap import release_free_memory
@@ -209,17 +209,12 @@ def spatial_blocks(
     blocks = []
     for group in np.split(owned_pieces[order], np.flatnonzero(np.diff(key[order])) + 1):
         own = np.sort(group)
-        # A tree of the pieces near this block only: one tree of every piece of a big set would hold a
-        # geometry per piece at once (hundreds of MB at a few million vertices).
+        # Only the pieces filed near this block are compared with its own (on the arrays: a geometry per box
+        # had cost more than the comparisons).
         candidates = buckets.near(piece_boxes[own])
-        tree = shapely.STRtree(_boxes(piece_boxes[candidates]))
-        _, hit = tree.query(_boxes(piece_boxes[own]))
+        _, hit = box_pairs(piece_boxes[own], piece_boxes[candidates])
         blocks.append(_block(own, candidates[hit], first, last, owner, start))
     return blocks
-
-
-def _boxes(boxes: NDArray[np.floating]) -> NDArray[np.object_]:
-    return shapely.box(boxes[:, 0], boxes[:, 1], boxes[:, 2], boxes[:, 3])
 
 
 #: Pieces per bucket of the grid that narrows a block's search to the pieces around it.
@@ -325,6 +320,10 @@ class _SpoolBases:
     def __getitem__(self, index: int) -> Coords:
         return self.spool.get([index])[0].base
 
+    def take(self, indices: Sequence[int]) -> list[Coords]:
+        """The base rows of several surfaces, read together."""
+        return [s.base for s in self.spool.get(indices)]
+
 
 def _block_tasks(
     blocks: Sequence[Block], spool: Spool, ladder: NDArray[np.float64], steps: list[int]
@@ -409,10 +408,11 @@ def find_crossings_by_block(
     tasks = _block_tasks(blocks, spool, ladder, list(steps))
     checks = map_ordered(executor, block_contacts, tasks, weight=_task_bytes, budget=BLOCK_TASK_BUDGET_BYTES)
     for block, pairs in zip(blocks, checks, strict=True):
-        for a, b in pairs:
-            pair = (int(block.near[a]), int(block.near[b]))
-            # Two stretches of one contour meet where they join (the input touch test would say so too).
-            if pair[0] != pair[1] and pair not in touches:
+        # Two stretches of one contour meet where they join (the input touch test would say so too).
+        met = {(int(block.near[a]), int(block.near[b])) for a, b in pairs} - {(i, i) for i in block.near.tolist()}
+        touches.learn(met)  # the block's pairs asked together: each input line read once
+        for pair in met:
+            if pair not in touches:
                 found.update(pair)
     release_free_memory()
     return found
