@@ -16,6 +16,7 @@ blocks are checked apart from each other, on any executor, with memory for a few
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass, replace
@@ -331,18 +332,64 @@ def _block_tasks(
     """One task per block, each block's surfaces read from the spool only when its task is sent: its own
     surfaces as the spool keeps them, every other one cut to its near stretch here, so that a long contour
     passing by is not shipped whole to every block it passes (a task's size follows the block's rows)."""
+    cache = _NearCache(spool, NEAR_CACHE_BYTES)
     for b in blocks:
         near: list[CCS | bytes] = []
         # A few surfaces read at a time: whole, the long contours passing by a block can weigh far more than
         # their stretches, and the block's task holds only those.
         for k in range(0, len(b.near), NEAR_READ_BATCH):
             at = slice(k, k + NEAR_READ_BATCH)
-            payloads = spool.get_payloads(b.near[at].tolist())
+            numbers = b.near[at].tolist()
+            payloads = cache.payloads(numbers)
             near.extend(
-                p if f < 0 else _stretch(surface_of(p), f, la)
-                for p, f, la in zip(payloads, b.first[at].tolist(), b.last[at].tolist(), strict=True)
+                p if f < 0 else _stretch(cache.surface(n), f, la)
+                for n, p, f, la in zip(numbers, payloads, b.first[at].tolist(), b.last[at].tolist(), strict=True)
             )
         yield near, np.flatnonzero(b.own).tolist(), ladder, steps
+
+
+#: Bytes of surfaces :class:`_NearCache` keeps while one check's block tasks are made.
+NEAR_CACHE_BYTES = 32 << 20
+
+
+class _NearCache:
+    """The surfaces read for one check's blocks, the most recently used kept up to ``budget`` bytes (as the spool
+    keeps them, and opened once a stretch of them is cut): neighbouring blocks share most of their near
+    contours, and on dense data reading and opening them again for every block cost more than the checks."""
+
+    def __init__(self, spool: Spool, budget: int) -> None:
+        self.spool = spool
+        self.budget = budget
+        self.items: OrderedDict[int, list[Any]] = OrderedDict()  # number -> [payload, opened surface or None]
+        self.size = 0
+
+    def payloads(self, numbers: list[int]) -> list[CCS | bytes]:
+        """The surfaces ``numbers`` as the spool keeps them (read only those not kept)."""
+        missing = sorted(set(numbers) - self.items.keys())
+        for n, payload in zip(missing, self.spool.get_payloads(missing), strict=True) if missing else ():
+            self.items[n] = [payload, None]
+            self.size += _payload_bytes(payload)
+        for n in numbers:
+            self.items.move_to_end(n)
+        while self.size > self.budget and len(self.items) > len(numbers):  # never the ones just asked for
+            _, (payload, opened) = self.items.popitem(last=False)
+            self.size -= _payload_bytes(payload) + (0 if opened is None else _payload_bytes(opened))
+        return [self.items[n][0] for n in numbers]
+
+    def surface(self, number: int) -> CCS:
+        """Surface ``number`` opened (it must have been asked for by :meth:`payloads` just before)."""
+        entry = self.items[number]
+        if entry[1] is None:
+            opened = surface_of(entry[0])
+            entry[1] = opened
+            if opened is not entry[0]:
+                self.size += _payload_bytes(opened)
+        surface: CCS = entry[1]
+        return surface
+
+
+def _payload_bytes(payload: CCS | bytes) -> int:
+    return len(payload) if isinstance(payload, bytes) else payload.base.nbytes + payload.top.nbytes
 
 
 #: Surfaces of a block read from the spool at a time while its task is made.
