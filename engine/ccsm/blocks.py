@@ -43,8 +43,8 @@ BLOCK_CONTOURS = 1024
 BLOCK_ROWS = 1 << 17
 
 #: Rebuilt contours per block when only they are checked again: small blocks keep each check to the rebuilt
-#: contours' surroundings.
-REBUILT_PER_BLOCK = 16
+#: contours' surroundings, but blocks of 16 read and cut their shared neighbours again and again on dense data.
+REBUILT_PER_BLOCK = 64
 
 #: Segments per piece of the blocks' index: short enough that a contour passing by a block is cut close to the
 #: block, long enough that the index is a small fraction of the rows.
