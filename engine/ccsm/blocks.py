@@ -16,15 +16,16 @@ blocks are checked apart from each other, on any executor, with memory for a few
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import shapely
 from numpy.typing import NDArray
 
+from engine.ccsm.near import box_pairs
 from engine.ccsm.spool import Spool, surface_of
 from engine.ccsm.topology import InputTouches, concatenated_ranges, new_contact_pairs, per_piece, piece_ranges
 from engine.heap import release_free_memory
@@ -42,8 +43,8 @@ BLOCK_CONTOURS = 1024
 BLOCK_ROWS = 1 << 17
 
 #: Rebuilt contours per block when only they are checked again: small blocks keep each check to the rebuilt
-#: contours' surroundings.
-REBUILT_PER_BLOCK = 16
+#: contours' surroundings, but blocks of 16 read and cut their shared neighbours again and again on dense data.
+REBUILT_PER_BLOCK = 64
 
 #: Segments per piece of the blocks' index: short enough that a contour passing by a block is cut close to the
 #: block, long enough that the index is a small fraction of the rows.
@@ -209,17 +210,12 @@ def spatial_blocks(
     blocks = []
     for group in np.split(owned_pieces[order], np.flatnonzero(np.diff(key[order])) + 1):
         own = np.sort(group)
-        # A tree of the pieces near this block only: one tree of every piece of a big set would hold a
-        # geometry per piece at once (hundreds of MB at a few million vertices).
+        # Only the pieces filed near this block are compared with its own (on the arrays: a geometry per box
+        # had cost more than the comparisons).
         candidates = buckets.near(piece_boxes[own])
-        tree = shapely.STRtree(_boxes(piece_boxes[candidates]))
-        _, hit = tree.query(_boxes(piece_boxes[own]))
+        _, hit = box_pairs(piece_boxes[own], piece_boxes[candidates])
         blocks.append(_block(own, candidates[hit], first, last, owner, start))
     return blocks
-
-
-def _boxes(boxes: NDArray[np.floating]) -> NDArray[np.object_]:
-    return shapely.box(boxes[:, 0], boxes[:, 1], boxes[:, 2], boxes[:, 3])
 
 
 #: Pieces per bucket of the grid that narrows a block's search to the pieces around it.
@@ -325,6 +321,10 @@ class _SpoolBases:
     def __getitem__(self, index: int) -> Coords:
         return self.spool.get([index])[0].base
 
+    def take(self, indices: Sequence[int]) -> list[Coords]:
+        """The base rows of several surfaces, read together."""
+        return [s.base for s in self.spool.get(indices)]
+
 
 def _block_tasks(
     blocks: Sequence[Block], spool: Spool, ladder: NDArray[np.float64], steps: list[int]
@@ -332,18 +332,64 @@ def _block_tasks(
     """One task per block, each block's surfaces read from the spool only when its task is sent: its own
     surfaces as the spool keeps them, every other one cut to its near stretch here, so that a long contour
     passing by is not shipped whole to every block it passes (a task's size follows the block's rows)."""
+    cache = _NearCache(spool, NEAR_CACHE_BYTES)
     for b in blocks:
         near: list[CCS | bytes] = []
         # A few surfaces read at a time: whole, the long contours passing by a block can weigh far more than
         # their stretches, and the block's task holds only those.
         for k in range(0, len(b.near), NEAR_READ_BATCH):
             at = slice(k, k + NEAR_READ_BATCH)
-            payloads = spool.get_payloads(b.near[at].tolist())
+            numbers = b.near[at].tolist()
+            payloads = cache.payloads(numbers)
             near.extend(
-                p if f < 0 else _stretch(surface_of(p), f, la)
-                for p, f, la in zip(payloads, b.first[at].tolist(), b.last[at].tolist(), strict=True)
+                p if f < 0 else _stretch(cache.surface(n), f, la)
+                for n, p, f, la in zip(numbers, payloads, b.first[at].tolist(), b.last[at].tolist(), strict=True)
             )
         yield near, np.flatnonzero(b.own).tolist(), ladder, steps
+
+
+#: Bytes of surfaces :class:`_NearCache` keeps while one check's block tasks are made.
+NEAR_CACHE_BYTES = 32 << 20
+
+
+class _NearCache:
+    """The surfaces read for one check's blocks, the most recently used kept up to ``budget`` bytes (as the spool
+    keeps them, and opened once a stretch of them is cut): neighbouring blocks share most of their near
+    contours, and on dense data reading and opening them again for every block cost more than the checks."""
+
+    def __init__(self, spool: Spool, budget: int) -> None:
+        self.spool = spool
+        self.budget = budget
+        self.items: OrderedDict[int, list[Any]] = OrderedDict()  # number -> [payload, opened surface or None]
+        self.size = 0
+
+    def payloads(self, numbers: list[int]) -> list[CCS | bytes]:
+        """The surfaces ``numbers`` as the spool keeps them (read only those not kept)."""
+        missing = sorted(set(numbers) - self.items.keys())
+        for n, payload in zip(missing, self.spool.get_payloads(missing), strict=True) if missing else ():
+            self.items[n] = [payload, None]
+            self.size += _payload_bytes(payload)
+        for n in numbers:
+            self.items.move_to_end(n)
+        while self.size > self.budget and len(self.items) > len(numbers):  # never the ones just asked for
+            _, (payload, opened) = self.items.popitem(last=False)
+            self.size -= _payload_bytes(payload) + (0 if opened is None else _payload_bytes(opened))
+        return [self.items[n][0] for n in numbers]
+
+    def surface(self, number: int) -> CCS:
+        """Surface ``number`` opened (it must have been asked for by :meth:`payloads` just before)."""
+        entry = self.items[number]
+        if entry[1] is None:
+            opened = surface_of(entry[0])
+            entry[1] = opened
+            if opened is not entry[0]:
+                self.size += _payload_bytes(opened)
+        surface: CCS = entry[1]
+        return surface
+
+
+def _payload_bytes(payload: CCS | bytes) -> int:
+    return len(payload) if isinstance(payload, bytes) else payload.base.nbytes + payload.top.nbytes
 
 
 #: Surfaces of a block read from the spool at a time while its task is made.
@@ -409,10 +455,11 @@ def find_crossings_by_block(
     tasks = _block_tasks(blocks, spool, ladder, list(steps))
     checks = map_ordered(executor, block_contacts, tasks, weight=_task_bytes, budget=BLOCK_TASK_BUDGET_BYTES)
     for block, pairs in zip(blocks, checks, strict=True):
-        for a, b in pairs:
-            pair = (int(block.near[a]), int(block.near[b]))
-            # Two stretches of one contour meet where they join (the input touch test would say so too).
-            if pair[0] != pair[1] and pair not in touches:
+        # Two stretches of one contour meet where they join (the input touch test would say so too).
+        met = {(int(block.near[a]), int(block.near[b])) for a, b in pairs} - {(i, i) for i in block.near.tolist()}
+        touches.learn(met)  # the block's pairs asked together: each input line read once
+        for pair in met:
+            if pair not in touches:
                 found.update(pair)
     release_free_memory()
     return found

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
-from engine.ccsm.blocks import PieceIndex, find_crossings_by_block, input_touches
+from engine.ccsm.blocks import PieceIndex, find_crossings_by_block, input_touches, surface_boxes
 from engine.ccsm.ccs import CCS, build_ccs, check_contour, slice_area
 from engine.ccsm.regression import ScaleModel, fit_scale_model
 from engine.ccsm.spool import MemorySpool, Spool
@@ -357,14 +357,16 @@ def resolve_crossings(
             if factors[i] > new_factor:
                 todo.append((i, new_factor))
         rebuilt_now: set[int] = set()
+        batch: list[tuple[int, CCS]] = []
         for (i, _), rebuilt in zip(todo, _rebuild(inputs, labels, todo, params, model, executor), strict=True):
             if isinstance(rebuilt, CCS):
-                spool.put(i, rebuilt)
-                boxes[i] = rebuilt.bounds
-                pieces.put([i], [rebuilt])
+                batch.append((i, rebuilt))
                 factors[i] = rebuilt.tolerance_factor
                 changed.add(i)
                 rebuilt_now.add(i)
+            if len(batch) >= REPAIR_KEEP_BATCH:
+                _keep(batch, spool, boxes, pieces)
+        _keep(batch, spool, boxes, pieces)
         # Only the rebuilt contours can have made new crossings (or still have old ones).
         involved = (
             find_crossings_by_block(spool, boxes, pieces, model.ladder, steps, rebuilt_now, executor, touches=touches)
@@ -372,6 +374,23 @@ def resolve_crossings(
             else set()
         )
     return len(changed)
+
+
+#: Rebuilt surfaces kept (spooled, boxed and cut into pieces) at a time: one by one, the fixed cost of each
+#: step was most of it when a round rebuilds thousands.
+REPAIR_KEEP_BATCH = 64
+
+
+def _keep(batch: list[tuple[int, CCS]], spool: Spool, boxes: NDArray[np.float64], pieces: PieceIndex) -> None:
+    """Put rebuilt surfaces (number, surface) in the spool, the boxes and the pieces; empties ``batch``."""
+    if not batch:
+        return
+    numbers = [i for i, _ in batch]
+    surfaces = [s for _, s in batch]
+    spool.put_many(batch)
+    boxes[numbers] = surface_boxes(surfaces)
+    pieces.put(numbers, surfaces)
+    batch.clear()
 
 
 def _rebuild(

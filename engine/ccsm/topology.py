@@ -6,7 +6,7 @@ that overlaps everything, its pieces do not, so the index rejects almost every c
 
 from __future__ import annotations
 
-from collections.abc import Container, Sequence
+from collections.abc import Container, Iterable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -15,6 +15,7 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
+from engine.ccsm.near import box_pairs, piece_gaps
 from engine.ccsm.sweep import pairs_meet_in_steps, pieces_meet
 from engine.types import Coords
 
@@ -154,9 +155,9 @@ class SweepIndex:
         # Every slice of a piece, at any t, stays inside the box of its rows at t = 0 and t = 1.
         lo = per_piece(np.minimum, np.minimum(base, top), first, last)
         hi = per_piece(np.maximum, np.maximum(base, top), first, last)
-        boxes = shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1])
+        boxes = np.hstack([lo, hi])
         probes = np.arange(len(boxes)) if only is None else np.flatnonzero(np.isin(owner, list(only)))
-        p, q = shapely.STRtree(boxes).query(boxes[probes])
+        p, q = box_pairs(boxes[probes], boxes)
         p = probes[p]
         # Each pair of pieces once: a probed piece meets a piece of a line that is not probed from its side only.
         keep = owner[p] < owner[q]
@@ -302,14 +303,10 @@ def _close_enough(
     """
     if not len(p):
         return p, q, np.zeros(0), np.zeros(len(first))
-    pieces = np.unique(np.concatenate([p, q]))
-    point, counts = _points_of(first[pieces], last[pieces])
-    geoms = np.empty(len(first), dtype=object)
-    geoms[pieces] = shapely.linestrings(base[point], indices=np.repeat(np.arange(len(pieces)), counts))
     move = np.linalg.norm(top - base, axis=1)
     reach = per_piece(np.maximum, move[:, None], first, last)[:, 0]
     # INPUT_TOUCH_M of slack: a pair exactly at the limit is kept, whatever the rounding of the distance.
-    gap = shapely.distance(geoms[p], geoms[q])
+    gap = piece_gaps(base, first, last, p, q)  # shapely.distance of the pieces' base rows, without geometries
     near = gap <= reach[p] + reach[q] + INPUT_TOUCH_M
     return p[near], q[near], gap[near], reach
 
@@ -350,6 +347,26 @@ class InputTouches:
             shapely.prepare(a)
             self._known[(i, j)] = bool(shapely.dwithin(a, b, INPUT_TOUCH_M))
         return self._known[(i, j)]
+
+    def learn(self, pairs: Iterable[tuple[int, int]]) -> None:
+        """Ask these pairs now, together: each line of them is read once (all at once where ``lines`` has a
+        ``take(indices)``, as the spool's base rows do) and prepared once, however many pairs it is in."""
+        todo = sorted({pair for pair in pairs if pair not in self._known})
+        for k in range(0, len(todo), LEARN_BATCH):
+            batch = todo[k : k + LEARN_BATCH]
+            numbers = sorted({n for pair in batch for n in pair})
+            take = getattr(self.lines, "take", None)
+            lines = take(numbers) if take is not None else [self.lines[n] for n in numbers]
+            geoms = {n: shapely.linestrings(np.asarray(x, np.float64)) for n, x in zip(numbers, lines, strict=True)}
+            a = np.array([geoms[i] for i, _ in batch], dtype=object)
+            b = np.array([geoms[j] for _, j in batch], dtype=object)
+            shapely.prepare(a)  # as in __contains__: the first line of each pair prepared
+            for pair, hit in zip(batch, shapely.dwithin(a, b, INPUT_TOUCH_M).tolist(), strict=True):
+                self._known[pair] = bool(hit)
+
+
+#: Pairs of lines :meth:`InputTouches.learn` reads and asks at a time (bounds the lines held at once).
+LEARN_BATCH = 256
 
 
 def new_contact_pairs(

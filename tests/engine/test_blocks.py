@@ -175,3 +175,35 @@ def test_a_block_task_carries_whole_surfaces_as_stored_and_stretches_cut(tmp_pat
                 cut += len(s.base) < len(whole.base)
     spool.close()
     assert cut > 0
+
+
+@pytest.mark.parametrize("budget", [0, 20_000, 1 << 30])
+def test_block_tasks_are_the_same_whatever_the_near_cache_keeps(tmp_path, monkeypatch, budget: int) -> None:
+    """Neighbouring blocks share near surfaces, kept between blocks up to a byte budget: every task's rows are
+    the spool's whatever is kept (nothing kept, some evicted, all kept), and with room for all each surface is
+    read once."""
+    from engine.ccsm.blocks import _block_tasks
+    from engine.ccsm.spool import surface_of
+    from engine.store.spool import DiskSpool
+
+    surfaces = random_lines()
+    spool = DiskSpool(tmp_path)
+    spool.put_many(enumerate(surfaces))
+    reads: list[int] = []
+    read = spool.get_payloads
+    monkeypatch.setattr(spool, "get_payloads", lambda indices: reads.extend(indices) or read(indices))
+    monkeypatch.setattr(blocks, "NEAR_CACHE_BYTES", budget)
+    pieces = PieceIndex()
+    pieces.put(range(len(surfaces)), surfaces)
+    found = spatial_blocks(surface_boxes(surfaces), pieces, per_block=8)
+    for b, (near, *_) in zip(found, _block_tasks(found, spool, np.ones(2), [0]), strict=True):
+        for k, (i, f, la) in enumerate(zip(b.near.tolist(), b.first.tolist(), b.last.tolist(), strict=True)):
+            rows = slice(None) if f < 0 else slice(f, la + 1)
+            np.testing.assert_array_equal(surface_of(near[k]).base, surfaces[i].base[rows])
+            np.testing.assert_array_equal(surface_of(near[k]).top, surfaces[i].top[rows])
+    spool.close()
+    every = {i for b in found for i in b.near.tolist()}
+    if budget == 1 << 30:
+        assert sorted(reads) == sorted(every)
+    else:
+        assert len(reads) > len(every)  # read again once evicted

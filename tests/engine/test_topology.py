@@ -119,3 +119,40 @@ def test_input_touches_knows_lines_that_meet_in_the_input_pair_by_pair() -> None
     assert (0, 1) in touches
     assert (0, 2) not in touches
     assert (1, 2) in touches  # they overlap along x = 5
+
+
+class _CountingLines(list):
+    """Lines that count how often each is read, one by one or together (as the spool's base rows are)."""
+
+    def __init__(self, lines: list[np.ndarray]) -> None:
+        super().__init__(lines)
+        self.reads: list[int] = []
+
+    def take(self, indices: list[int]) -> list[np.ndarray]:
+        self.reads.extend(indices)
+        return [self[i] for i in indices]
+
+
+def test_input_touches_learned_together_answer_as_pair_by_pair() -> None:
+    """Pairs asked together (``learn``) get the answers of pairs asked one by one, on lines that touch within
+    INPUT_TOUCH_M, cross, overlap, share an end or stay apart by a little more, and each line is read once."""
+    rng = np.random.default_rng(5)
+    base = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]])
+    lines = [base]
+    for _ in range(40):
+        k = int(rng.integers(0, 5))
+        offset = [0.0, 1e-7, 5e-7, 2e-6, 1e-3][k]  # touching up to 1e-6, apart beyond
+        x = rng.uniform(1, 9)
+        lines.append(np.array([[x, offset], [x + rng.uniform(-1, 1), 3.0]]))  # above the base's first segment
+    lines.append(np.array([[5.0, -1.0], [5.0, 1.0]]))  # crossing
+    lines.append(np.array([[10.0, 10.0], [12.0, 12.0]]))  # sharing an end
+    counting = _CountingLines(lines)
+    pairs = {(0, j) for j in range(1, len(lines))} | {(i, i + 1) for i in range(1, len(lines) - 1)}
+    learned = InputTouches(counting)
+    learned.learn(pairs)
+    one_by_one = InputTouches(lines)
+    answers = {pair: pair in one_by_one for pair in pairs}
+    assert {pair: pair in learned for pair in pairs} == answers
+    assert sorted(counting.reads) == list(range(len(lines)))  # each line read once, for every pair it is in
+    with_base = [answers[(0, j)] for j in range(1, len(lines))]
+    assert any(with_base) and not all(with_base)

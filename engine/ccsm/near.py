@@ -1,0 +1,157 @@
+"""Which pieces of contour lie near each other, compiled: the pairs of boxes that meet, and the distance between
+two pieces' rows (docs/design.md section 4.8).
+
+The crossing repair asks both questions for hundreds of thousands of pieces per block. A shapely STRtree and
+``shapely.distance`` answer them too, but need a geometry object per box and per piece, which cost more than
+the answers; these kernels work on the arrays themselves and give the same answers: the same pairs as an
+STRtree query of boxes (boxes that only touch meet), and GEOS's distance between two linestrings, computed the
+way GEOS computes it (the smallest of its segment-to-segment distances).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+
+def box_pairs(a: NDArray[np.floating], b: NDArray[np.floating]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Every pair (i, j) of a box ``a[i]`` and a box ``b[j]`` that meet (closed boxes: touching counts), sorted
+    by i, then j. Boxes are rows (minx, miny, maxx, maxy).
+
+    A sort and sweep along x: each pair is found from the box whose minx is smaller (ties from ``a``'s side),
+    so only boxes that overlap in x are compared.
+
+    >>> box_pairs(np.array([[0.0, 0, 1, 1], [5, 5, 6, 6]]), np.array([[1.0, 1, 2, 2], [2, 0, 3, 1], [0, 0, 6, 0]]))
+    (array([0, 0]), array([0, 2]))
+    """
+    a = np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 4)
+    b = np.ascontiguousarray(b, dtype=np.float64).reshape(-1, 4)
+    oa = np.argsort(a[:, 0], kind="stable")
+    ob = np.argsort(b[:, 0], kind="stable")
+    ax, bx = a[oa, 0], b[ob, 0]
+    none = np.zeros(0, dtype=np.intp)
+    count = _sweep(a, b, oa, ob, ax, bx, none, none, False)
+    ia, ib = np.empty(count, dtype=np.intp), np.empty(count, dtype=np.intp)
+    _sweep(a, b, oa, ob, ax, bx, ia, ib, True)
+    order = np.lexsort((ib, ia))
+    return ia[order], ib[order]
+
+
+@njit(cache=True, nogil=True)
+def _sweep(a, b, oa, ob, ax, bx, ia, ib, fill):  # pragma: no cover - compiled
+    """Count (``fill`` False) or write the pairs of :func:`box_pairs`; ``ax``, ``bx`` the sorted minx."""
+    n = 0
+    for i in range(len(a)):  # b's minx in [a's minx, a's maxx]
+        k = np.searchsorted(bx, a[i, 0])
+        while k < len(bx) and bx[k] <= a[i, 2]:
+            j = ob[k]
+            if b[j, 1] <= a[i, 3] and a[i, 1] <= b[j, 3]:
+                if fill:
+                    ia[n] = i
+                    ib[n] = j
+                n += 1
+            k += 1
+    for j in range(len(b)):  # a's minx in (b's minx, b's maxx]: the pairs not found above
+        k = np.searchsorted(ax, b[j, 0], side="right")
+        while k < len(ax) and ax[k] <= b[j, 2]:
+            i = oa[k]
+            if b[j, 1] <= a[i, 3] and a[i, 1] <= b[j, 3]:
+                if fill:
+                    ia[n] = i
+                    ib[n] = j
+                n += 1
+            k += 1
+    return n
+
+
+def piece_gaps(
+    points: NDArray[np.float64],
+    first: NDArray[np.intp],
+    last: NDArray[np.intp],
+    p: NDArray[np.intp],
+    q: NDArray[np.intp],
+) -> NDArray[np.float64]:
+    """Distance between pieces ``p[k]`` and ``q[k]`` of ``points`` (a piece: the polyline of points first..last),
+    for every k: what ``shapely.distance`` gives for their linestrings.
+
+    >>> pts = np.array([[0.0, 0], [4, 0], [0, 3], [4, 3], [2, -1], [2, 1]])
+    >>> piece_gaps(pts, np.array([0, 2, 4]), np.array([1, 3, 5]), np.array([0, 0]), np.array([1, 2])).tolist()
+    [3.0, 0.0]
+    """
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    out = np.empty(len(p), dtype=np.float64)
+    _piece_gaps(points, np.asarray(first, np.intp), np.asarray(last, np.intp), np.asarray(p), np.asarray(q), out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _piece_gaps(pts, first, last, p, q, out):  # pragma: no cover - compiled
+    for k in range(len(p)):
+        best = np.inf
+        a0, a1, b0, b1 = first[p[k]], last[p[k]], first[q[k]], last[q[k]]
+        for i in range(a0, a1):
+            sx0 = min(pts[i, 0], pts[i + 1, 0])
+            sx1 = max(pts[i, 0], pts[i + 1, 0])
+            sy0 = min(pts[i, 1], pts[i + 1, 1])
+            sy1 = max(pts[i, 1], pts[i + 1, 1])
+            for j in range(b0, b1):
+                # A segment pair whose boxes are farther apart than the best so far cannot be nearer (GEOS skips
+                # them the same way); the smallest distance is the same.
+                dx = max(0.0, max(min(pts[j, 0], pts[j + 1, 0]) - sx1, sx0 - max(pts[j, 0], pts[j + 1, 0])))
+                dy = max(0.0, max(min(pts[j, 1], pts[j + 1, 1]) - sy1, sy0 - max(pts[j, 1], pts[j + 1, 1])))
+                if dx * dx + dy * dy > best * best:
+                    continue
+                ax, ay, bx, by = pts[i, 0], pts[i, 1], pts[i + 1, 0], pts[i + 1, 1]
+                d = _segment_to_segment(ax, ay, bx, by, pts[j, 0], pts[j, 1], pts[j + 1, 0], pts[j + 1, 1])
+                if d < best:
+                    best = d
+            if best == 0.0:
+                break
+        out[k] = best
+
+
+@njit(cache=True, nogil=True)
+def _point_to_segment(px, py, ax, ay, bx, by):  # pragma: no cover - compiled
+    """GEOS's ``Distance::pointToSegment``, operation for operation (the same rounding)."""
+    if ax == bx and ay == by:
+        return np.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
+    len2 = (bx - ax) * (bx - ax) + (by - ay) * (by - ay)
+    r = ((px - ax) * (bx - ax) + (py - ay) * (by - ay)) / len2
+    if r <= 0.0:
+        return np.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
+    if r >= 1.0:
+        return np.sqrt((px - bx) * (px - bx) + (py - by) * (py - by))
+    s = ((ay - py) * (bx - ax) - (ax - px) * (by - ay)) / len2
+    return abs(s) * np.sqrt(len2)
+
+
+@njit(cache=True, nogil=True)
+def _segment_to_segment(ax, ay, bx, by, cx, cy, dx, dy):  # pragma: no cover - compiled
+    """GEOS's ``Distance::segmentToSegment`` of segments AB and CD: 0 where they intersect, else the smallest
+    distance of an end point to the other segment."""
+    if ax == bx and ay == by:
+        return _point_to_segment(ax, ay, cx, cy, dx, dy)
+    if cx == dx and cy == dy:
+        return _point_to_segment(dx, dy, ax, ay, bx, by)
+    apart = False
+    if max(ax, bx) < min(cx, dx) or min(ax, bx) > max(cx, dx) or max(ay, by) < min(cy, dy) or min(ay, by) > max(cy, dy):
+        apart = True
+    else:
+        denom = (bx - ax) * (dy - cy) - (by - ay) * (dx - cx)
+        if denom == 0.0:
+            apart = True
+        else:
+            r = ((ay - cy) * (dx - cx) - (ax - cx) * (dy - cy)) / denom
+            s = ((ay - cy) * (bx - ax) - (ax - cx) * (by - ay)) / denom
+            if r < 0.0 or r > 1.0 or s < 0.0 or s > 1.0:
+                apart = True
+    if not apart:
+        return 0.0
+    return min(
+        _point_to_segment(ax, ay, cx, cy, dx, dy),
+        min(
+            _point_to_segment(bx, by, cx, cy, dx, dy),
+            min(_point_to_segment(cx, cy, ax, ay, bx, by), _point_to_segment(dx, dy, ax, ay, bx, by)),
+        ),
+    )

@@ -1,0 +1,88 @@
+"""The compiled near-piece kernels against the GEOS answers they replace (engine/ccsm/near.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import shapely
+
+from engine.ccsm.near import box_pairs, piece_gaps
+
+
+def _strtree_pairs(a: np.ndarray, b: np.ndarray) -> set[tuple[int, int]]:
+    tree = shapely.STRtree(shapely.box(b[:, 0], b[:, 1], b[:, 2], b[:, 3]))
+    i, j = tree.query(shapely.box(a[:, 0], a[:, 1], a[:, 2], a[:, 3]))
+    return set(zip(i.tolist(), j.tolist(), strict=True))
+
+
+def _random_boxes(rng: np.random.Generator, n: int, grid: bool) -> np.ndarray:
+    lo = rng.integers(0, 20, (n, 2)).astype(float) if grid else rng.uniform(0, 100, (n, 2))
+    size = rng.integers(0, 4, (n, 2)).astype(float) if grid else rng.exponential(5, (n, 2))
+    return np.hstack([lo, lo + size])
+
+
+@pytest.mark.parametrize("grid", [False, True])
+def test_box_pairs_are_the_strtree_pairs(grid: bool) -> None:
+    """Random boxes, and boxes on an integer grid (many touch at an edge or a corner, many share a minx, some
+    are points or segments): the same pairs as the STRtree query, each once, sorted."""
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        a, b = _random_boxes(rng, 150, grid), _random_boxes(rng, 200, grid)
+        ia, ib = box_pairs(a, b)
+        pairs = list(zip(ia.tolist(), ib.tolist(), strict=True))
+        assert pairs == sorted(set(pairs))
+        assert set(pairs) == _strtree_pairs(a, b)
+    ia, ib = box_pairs(a, a)  # a set against itself, as the sweep index asks
+    assert set(zip(ia.tolist(), ib.tolist(), strict=True)) == _strtree_pairs(a, a)
+
+
+def test_box_pairs_touching_and_empty() -> None:
+    unit = np.array([[0.0, 0.0, 1.0, 1.0]])
+    touching = np.array([[1.0, 1.0, 2.0, 2.0], [1.0, -1.0, 1.0, 0.0], [1.0 + 1e-12, 0.0, 2.0, 1.0]])
+    assert box_pairs(unit, touching)[1].tolist() == [0, 1]  # corner and edge touches meet; a gap does not
+    assert box_pairs(unit, np.zeros((0, 4)))[0].tolist() == []
+
+
+def _pieces(rng: np.random.Generator, kind: str) -> np.ndarray:
+    """A few points of a piece: random, or adversarial for the distance (shared or repeated points, collinear
+    and overlapping runs, crossings, lines meeting at a vertex)."""
+    n = int(rng.integers(2, 8))
+    if kind == "random":
+        return np.cumsum(rng.normal(0, 1, (n, 2)), axis=0) + rng.uniform(-3, 3, 2)
+    if kind == "grid":  # integer points: touching, collinear, overlapping and crossing segments, repeats
+        return rng.integers(-2, 3, (n, 2)).astype(float)
+    if kind == "collinear":  # all on one line, some backtracking
+        return np.outer(rng.uniform(-2, 2, n), [0.6, 0.8]) + [0.1, 0.1]
+    return np.repeat(rng.integers(-2, 3, (1, 2)).astype(float), n, axis=0)  # "degenerate": one point repeated
+
+
+@pytest.mark.parametrize("kind", ["random", "grid", "collinear", "degenerate"])
+def test_piece_gaps_are_geos_distances(kind: str) -> None:
+    """The gap of every pair is shapely's distance of the two linestrings (the same number, bit for bit, as the
+    crossing check's decisions are made on it), on random pieces and on pieces made to touch, cross, overlap
+    collinearly and collapse to a point; pieces against pieces of every kind."""
+    rng = np.random.default_rng(7)
+    kinds = ["random", "grid", "collinear", "degenerate"]
+    lines = [_pieces(rng, kind) for _ in range(60)] + [_pieces(rng, kinds[k % 4]) for k in range(60)]
+    sizes = np.array([len(x) for x in lines])
+    first = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    last = first + sizes - 1
+    p, q = np.meshgrid(np.arange(60), np.arange(len(lines)), indexing="ij")
+    p, q = p.ravel(), q.ravel()
+    gaps = piece_gaps(np.concatenate(lines), first, last, p, q)
+    geoms = shapely.linestrings(np.concatenate(lines), indices=np.repeat(np.arange(len(lines)), sizes))
+    expected = shapely.distance(geoms[p], geoms[q])
+    assert np.array_equal(gaps, expected)
+    if kind != "degenerate":
+        assert (gaps == 0).any() and (gaps > 0).any()  # the cases are mixed: meeting and apart pairs
+
+
+def test_piece_gaps_far_coordinates() -> None:
+    """At UTM-sized coordinates (where rounding differs most from small ones) the gaps are still GEOS's."""
+    rng = np.random.default_rng(11)
+    pts = rng.normal(0, 30, (400, 2)).cumsum(axis=0) + [500_000.0, 4_000_000.0]
+    first = np.arange(0, 400, 5)
+    last = first + 4
+    p, q = rng.integers(0, 80, 2000), rng.integers(0, 80, 2000)
+    geoms = shapely.linestrings(pts, indices=np.repeat(np.arange(80), 5))
+    assert np.array_equal(piece_gaps(pts, first, last, p, q), shapely.distance(geoms[p], geoms[q]))
