@@ -4,8 +4,10 @@ two pieces' rows (docs/design.md section 4.8).
 The crossing repair asks both questions for hundreds of thousands of pieces per block. A shapely STRtree and
 ``shapely.distance`` answer them too, but need a geometry object per box and per piece, which cost more than
 the answers; these kernels work on the arrays themselves and give the same answers: the same pairs as an
-STRtree query of boxes (boxes that only touch meet), and GEOS's distance between two linestrings, computed the
-way GEOS computes it (the smallest of its segment-to-segment distances).
+STRtree query of boxes (boxes that only touch meet), and the distance ``shapely.distance`` gives between two
+linestrings: the smallest segment-to-segment distance, each from the textbook formulas (the projection parameter
+of a point on a segment, the perpendicular distance by the cross product, the parametric intersection test),
+evaluated in an order whose rounding agrees with shapely's to the last bit (tests/engine/test_near.py).
 """
 
 from __future__ import annotations
@@ -96,8 +98,8 @@ def _piece_gaps(pts, first, last, p, q, out):  # pragma: no cover - compiled
             sy0 = min(pts[i, 1], pts[i + 1, 1])
             sy1 = max(pts[i, 1], pts[i + 1, 1])
             for j in range(b0, b1):
-                # A segment pair whose boxes are farther apart than the best so far cannot be nearer (GEOS skips
-                # them the same way); the smallest distance is the same.
+                # A segment pair whose boxes are farther apart than the best so far cannot be nearer; skipping
+                # it leaves the smallest distance as it is.
                 dx = max(0.0, max(min(pts[j, 0], pts[j + 1, 0]) - sx1, sx0 - max(pts[j, 0], pts[j + 1, 0])))
                 dy = max(0.0, max(min(pts[j, 1], pts[j + 1, 1]) - sy1, sy0 - max(pts[j, 1], pts[j + 1, 1])))
                 if dx * dx + dy * dy > best * best:
@@ -113,7 +115,7 @@ def _piece_gaps(pts, first, last, p, q, out):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def _point_to_segment(px, py, ax, ay, bx, by):  # pragma: no cover - compiled
-    """GEOS's ``Distance::pointToSegment``, operation for operation (the same rounding)."""
+    """Distance from P to segment AB: to the nearer end where P projects outside AB, else |cross| / |AB|."""
     if ax == bx and ay == by:
         return np.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
     len2 = (bx - ax) * (bx - ax) + (by - ay) * (by - ay)
@@ -128,8 +130,8 @@ def _point_to_segment(px, py, ax, ay, bx, by):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def _segment_to_segment(ax, ay, bx, by, cx, cy, dx, dy):  # pragma: no cover - compiled
-    """GEOS's ``Distance::segmentToSegment`` of segments AB and CD: 0 where they intersect, else the smallest
-    distance of an end point to the other segment."""
+    """Distance between segments AB and CD: 0 where they intersect, else the smallest distance of an end point
+    to the other segment."""
     if ax == bx and ay == by:
         return _point_to_segment(ax, ay, cx, cy, dx, dy)
     if cx == dx and cy == dy:
