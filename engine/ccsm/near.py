@@ -45,25 +45,24 @@ def _sweep(a, b, oa, ob, ax, bx, ia, ib, fill):  # pragma: no cover - compiled
     """Count (``fill`` False) or write the pairs of :func:`box_pairs`; ``ax``, ``bx`` the sorted minx."""
     n = 0
     for i in range(len(a)):  # b's minx in [a's minx, a's maxx]
-        k = np.searchsorted(bx, a[i, 0])
-        while k < len(bx) and bx[k] <= a[i, 2]:
-            j = ob[k]
-            if b[j, 1] <= a[i, 3] and a[i, 1] <= b[j, 3]:
-                if fill:
-                    ia[n] = i
-                    ib[n] = j
-                n += 1
-            k += 1
+        n = _scan(a[i], b, ob, bx, np.searchsorted(bx, a[i, 0]), i, True, ia, ib, n, fill)
     for j in range(len(b)):  # a's minx in (b's minx, b's maxx]: the pairs not found above
-        k = np.searchsorted(ax, b[j, 0], side="right")
-        while k < len(ax) and ax[k] <= b[j, 2]:
-            i = oa[k]
-            if b[j, 1] <= a[i, 3] and a[i, 1] <= b[j, 3]:
-                if fill:
-                    ia[n] = i
-                    ib[n] = j
-                n += 1
-            k += 1
+        n = _scan(b[j], a, oa, ax, np.searchsorted(ax, b[j, 0], side="right"), j, False, ia, ib, n, fill)
+    return n
+
+
+@njit(cache=True, nogil=True)
+def _scan(box, others, order, minx, k, at, box_is_a, ia, ib, n, fill):  # pragma: no cover - compiled
+    """From sorted position ``k`` on, the ``others`` whose minx is within ``box``'s x range and that meet it in
+    y: each written (``box`` at index ``at``, on a's side if ``box_is_a``) and counted; returns the new count."""
+    while k < len(minx) and minx[k] <= box[2]:
+        j = order[k]
+        if others[j, 1] <= box[3] and box[1] <= others[j, 3]:
+            if fill:
+                ia[n] = at if box_is_a else j
+                ib[n] = j if box_is_a else at
+            n += 1
+        k += 1
     return n
 
 
