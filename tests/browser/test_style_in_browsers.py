@@ -21,6 +21,8 @@
 from __future__ import annotations
 
 import math
+import re
+import time
 
 import httpx
 import numpy as np
@@ -256,6 +258,44 @@ def record_wheel_zoom(app) -> list[dict]:
             app.page.wait_for_timeout(250)
         app.wait_settled(90)
     return app.page.evaluate("() => window.__frames")
+
+
+#: The label layers' tiles (the dataset's own per-level tiles; the morph layer reads /morph/).
+LABEL_TILES = re.compile(r"/tiles/sample/\d+/\d+/\d+\.mvt")
+
+
+def test_the_page_is_not_settled_while_its_label_tiles_are_loading(app):
+    # The pop test starts recording once the page says it is settled: a label tile still in flight then would
+    # arrive as a label popping in before any zoom.
+    app.open()
+    centre, _ = centre_and_bounds(app.base_url)
+    held = []
+
+    def hold(route) -> None:
+        held.append(route)
+
+    app.page.route(LABEL_TILES, hold)
+    app.jump(center=centre, zoom=13.3)  # label tiles of zoom 13, not fetched by the opening view
+    morph_settled = """() => {
+        const l = window.ccsm.layers.main, m = l.map;
+        return l.settled && !m.isMoving() && m.isSourceLoaded(l.active.sourceId);
+    }"""
+    app.wait_until(morph_settled, 30, what="the contour lines settled")
+    app.wait_until("() => true", 0)  # let the route handler take the label requests made so far
+    assert held, "the view asked for no label tile"
+    until = time.monotonic() + 1.0
+    while time.monotonic() < until:
+        assert not app.page.evaluate("() => window.ccsm.settled()"), "settled with its label tiles in flight"
+        time.sleep(0.1)
+    for route in held:
+        route.continue_()
+    app.page.unroute(LABEL_TILES)
+    app.wait_settled()
+    labels = app.page.evaluate(
+        "(ids) => window.ccsm.maps.a.queryRenderedFeatures({layers: ids}).length",
+        app.page.evaluate("() => window.ccsm.cartography").get("labelLayerIds"),
+    )
+    assert labels > 0, "no label drawn once the label tiles came"
 
 
 def test_wheel_zoom_across_three_levels_shows_nothing_new_except_by_fading(app):

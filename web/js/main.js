@@ -523,10 +523,15 @@ window.ccsm = {
   setMorphOverride(q) {
     for (const l of allLayers()) l?.setOverride(q);
   },
-  /** True when every layer in use shows what the camera and controls ask for and all its tiles are in. */
+  /** True when every layer in use shows what the camera and controls ask for and all its tiles are in, the
+   *  label and hillshade tiles of map a included (they come from sources of their own, which load apart). */
   settled() {
     const used = layersInUse();
     if (!state.tilejson || !used.length) return false;
+    const a = app.maps.a;
+    for (const id of [LABEL_SOURCE, HILLSHADE_SOURCE]) {
+      if (a?.getSource(id) && !a.isSourceLoaded(id)) return false;
+    }
     return used.every((l) => {
       if (!l.settled || l.map.isMoving()) return false;
       try {
