@@ -3,9 +3,10 @@ batch of features at a time, through a scratch file as the build reads.
 
 The contour files are made once from the bench's fractal terrain (``bench_scale``, the ``grid`` series at 20 m)
 and written into var/bench-scale as a GeoPackage, a Shapefile and (``--formats``) a GeoJSON file. Each read
-runs in a process of its own (``--one``), so its peak RSS is its own; ``whole`` is the read as it was before
-batches (one pyogrio read of every feature: ``SEEKABLE_SUFFIXES`` emptied), ``batched`` the read as it is.
-GeoJSON is read in one go either way (see ``engine.io.vector.SEEKABLE_SUFFIXES``).
+runs in a process of its own (``--one``), so its peak RSS is its own; ``whole`` gathers every feature into one
+read before its lines are made (``engine.io.vector.READ_VERTICES`` unbounded), as reads were before batches;
+``batched`` is the read as it is (every format streamed in Arrow batches, reads of about
+``ASSEMBLE_BATCH_VERTICES`` vertices).
 
 Usage: python bench/bench_vector_read.py [--size 64] [--formats gpkg,shp] [--modes whole,batched]
 """
@@ -67,7 +68,7 @@ def read_one(path: Path, mode: str) -> dict[str, float]:
     from engine.io.source import read_source
 
     if mode == "whole":
-        vector.SEEKABLE_SUFFIXES = ()
+        vector.READ_VERTICES = 1 << 40
     before = rss_mb()
     with tempfile.TemporaryDirectory(dir=path.parent) as tmp:
         scratch = ReadScratch(tmp)
@@ -85,7 +86,7 @@ def read_one(path: Path, mode: str) -> dict[str, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--size", type=int, default=64, help="terrain size, × the sample (1, 4, 16, 64)")
-    parser.add_argument("--formats", default="gpkg,shp", help="comma-separated: gpkg, shp, geojson")
+    parser.add_argument("--formats", default="gpkg,shp,geojson", help="comma-separated: gpkg, shp, geojson")
     parser.add_argument("--modes", default="whole,batched", help="comma-separated: whole, batched")
     parser.add_argument("--one", nargs=2, metavar=("PATH", "MODE"), help=argparse.SUPPRESS)
     args = parser.parse_args()

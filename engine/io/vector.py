@@ -1,32 +1,35 @@
 """Contour lines from and to vector files (GeoJSON, GeoPackage, Shapefile), and the cleaning of all sources.
 
-Reading is vectorised: pyogrio returns a batch of features' geometries as WKB, shapely flattens them into one
-(N, 2) array with a part index, and one pyproj call projects a batch's vertices. Python loops run per feature,
-never per vertex. GeoPackages and Shapefiles are read a batch of features at a time (GDAL seeks to a feature
-there), so a big file is never held whole; GeoJSON is read in one go (see :data:`SEEKABLE_SUFFIXES`).
+Reading is vectorised: GDAL streams a layer's features in Arrow batches (pyogrio's ``open_arrow``, taken in by
+nanoarrow), their geometries as WKB; shapely flattens a batch into one (N, 2) array with a part index, and one
+pyproj call projects a batch's vertices. Python loops run per feature, never per vertex. Every format is read in
+one pass a batch at a time, so a big file is never held whole.
 """
 
 from __future__ import annotations
 
-import gc
 import json
 import math
 import os
 import uuid
+import warnings
 from collections import Counter
 from collections.abc import Iterable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field, replace
+from itertools import chain
 from pathlib import Path
 from typing import Any, NoReturn
 
+import nanoarrow as na
 import numpy as np
 import pyproj
 import shapely
+from nanoarrow.iterator import UnregisteredExtensionWarning
 from numpy.typing import NDArray
-from pyogrio import list_layers
+from pyogrio import list_layers, read_info
 from pyogrio.errors import DataLayerError, DataSourceError
-from pyogrio.raw import read as ogr_read
+from pyogrio.raw import open_arrow
 
 from engine.errors import InvalidContour, SourceError
 from engine.io.crs import (
@@ -48,16 +51,13 @@ ELEVATION_FIELDS: tuple[str, ...] = ("ele", "elev", "elevation", "z", "height", 
 #: File extensions read as contour lines.
 VECTOR_SUFFIXES: tuple[str, ...] = (".geojson", ".json", ".gpkg", ".shp")
 
-#: Contour files read a batch of features at a time (``skip_features``/``max_features``): GDAL's GeoPackage and
-#: Shapefile drivers seek to a feature directly. GDAL's GeoJSON driver streams the file, but a read that starts
-#: past the first feature parses the file again from its start (the driver still reports "fast set next by
-#: index"), so batches would cost a pass each: 9 batches of a 100 MB file took 22 s against 3.4 s for one read.
-#: A GeoJSON file is therefore read in one go (GDAL does not hold its text, only the features read).
-SEEKABLE_SUFFIXES: tuple[str, ...] = (".gpkg", ".shp")
-#: Features in the first batch read from a seekable file, few since their size is not known yet (a long line
-#: has tens of thousands of vertices); each next batch is sized from the vertices per feature read so far to
-#: hold about :data:`ASSEMBLE_BATCH_VERTICES` vertices.
-FIRST_READ_FEATURES = 64
+#: Features GDAL puts in one Arrow batch of a contour file's stream: few, since a long line has tens of thousands
+#: of vertices. Batches are gathered into reads of about :data:`ASSEMBLE_BATCH_VERTICES` vertices.
+ARROW_BATCH_FEATURES = 64
+#: Bytes of WKB per vertex of a 2-D line, to tell from the blobs read how many vertices a read holds.
+WKB_VERTEX_BYTES = 16
+#: Vertices gathered into one read of a contour file before its lines are made (None: ASSEMBLE_BATCH_VERTICES).
+READ_VERTICES: int | None = None
 
 #: shapely geometry type ids (``shapely.get_type_id``) that are lines.
 #: Largest latitude Web Mercator (EPSG:3857) covers: the edge of the square world; contours beyond cannot be
@@ -148,84 +148,127 @@ def read_contours(
         raise SourceError(f"{path}: file not found")
     if path.suffix.lower() not in VECTOR_SUFFIXES:
         raise SourceError(f"{path}: unknown contour format {path.suffix!r}; expected one of {VECTOR_SUFFIXES}")
-    seekable = path.suffix.lower() in SEEKABLE_SUFFIXES
     if layer is None:
         # Name the first layer explicitly: pyogrio warns when it has to pick one of several itself.
         with _as_source_error(path, layer):
             layer = str(list_layers(path)[0][0])
-    first = _read_features(path, layer, 0, FIRST_READ_FEATURES if seekable else None)
-    meta = first.meta
+    with _feature_stream(path, layer) as (meta, stream):
+        crs_text = meta.get("crs")
+        if not crs_text:
+            if path.suffix.lower() in (".geojson", ".json"):
+                crs_text = WGS84  # RFC 7946: GeoJSON without a crs member is longitude/latitude on WGS 84
+            else:
+                hint = " (is the .prj file missing?)" if path.suffix.lower() == ".shp" else ""
+                raise SourceError(f"{path}: the file has no CRS{hint}")
+        source_crs = parse_crs(crs_text, where=str(path))
 
-    crs_text = meta.get("crs")
-    if not crs_text:
-        if path.suffix.lower() in (".geojson", ".json"):
-            crs_text = WGS84  # RFC 7946: GeoJSON without a crs member is longitude/latitude on WGS 84
-        else:
-            hint = " (is the .prj file missing?)" if path.suffix.lower() == ".shp" else ""
-            raise SourceError(f"{path}: the file has no CRS{hint}")
-    source_crs = parse_crs(crs_text, where=str(path))
-
-    field_names = [str(name) for name in meta["fields"]]
-    elev_index = _find_elevation_field(field_names, elevation_field, path)
-    id_index = next((i for i, name in enumerate(field_names) if name.lower() == "id"), None)
-    if len(first.wkb) == 0:
-        raise SourceError(f"{path}: no features")
-
-    batches = _line_parts(first, path, layer, id_index, elev_index, field_names[elev_index])
-    del first  # the batches let go of each read once its lines are made
-    return assemble_batches(
-        batches, source_crs=source_crs, where=where, name=path.stem, tolerances=tolerances, scratch=scratch
-    )
-
-
-def _line_parts(
-    read: _FeatureRead, path: Path, layer: str, id_index: int | None, elev_index: int, elev_name: str
-) -> Iterator[LineParts]:
-    """The line parts of ``read`` and of the reads after it (while each is full), in batches of about
-    :data:`ASSEMBLE_BATCH_VERTICES` vertices; each next read is sized from the vertices per feature so far."""
-    vertices = 0
-    while len(read.wkb) > 0:
-        n = len(read.wkb)
-        feature_ids = _feature_ids(
-            read.fids, read.fields[id_index] if id_index is not None else None, n, start=read.start
+        field_names = [str(name) for name in meta["fields"]]
+        elev_name = field_names[_find_elevation_field(field_names, elevation_field, path)]
+        id_name = next((name for name in field_names if name.lower() == "id"), None)
+        reads = _feature_reads(stream, meta, path, layer, id_name, elev_name)
+        first = next(reads, None)
+        if first is None:
+            raise SourceError(f"{path}: no features")
+        batches = _line_parts(chain([first], reads), path, elev_name)
+        del first  # the batches let go of each read once its lines are made
+        return assemble_batches(
+            batches, source_crs=source_crs, where=where, name=path.stem, tolerances=tolerances, scratch=scratch
         )
-        elevations, elev_reasons = _parse_elevations(read.fields[elev_index], elev_name)
+
+
+def _line_parts(reads: Iterable[_FeatureRead], path: Path, elev_name: str) -> Iterator[LineParts]:
+    """The line parts of each read in turn, in batches of about :data:`ASSEMBLE_BATCH_VERTICES` vertices."""
+    for read in reads:
+        feature_ids = _feature_ids(read.fids, read.id_values, len(read.wkb), start=read.start)
+        elevations, elev_reasons = _parse_elevations(read.elevations, elev_name)
         parts = _explode_lines(read.wkb, feature_ids, elevations, elev_reasons, path.name)
-        vertices += len(parts.xy)
-        done, asked = read.start + n, read.asked
         del read  # the next read replaces this one rather than joining it in memory
         yield from in_batches(parts)
-        if asked is None or n < asked:
-            return
-        # At most ASSEMBLE_BATCH_VERTICES features too: features without a vertex cost memory all the same.
-        asked = min(max(1, round(ASSEMBLE_BATCH_VERTICES * done / max(vertices, 1))), ASSEMBLE_BATCH_VERTICES)
-        read = _read_features(path, layer, done, asked)
 
 
 @dataclass
 class _FeatureRead:
-    """Features ``start`` .. ``start + len(wkb) - 1`` of a layer as pyogrio reads them: ``meta`` holds the
-    layer's CRS and field names, ``fields`` one array per field; ``asked`` is how many were asked for (None:
-    every one from ``start``)."""
+    """Features ``start`` .. ``start + len(wkb) - 1`` of a layer: their FIDs, WKB geometries (None: no
+    geometry), ``id`` field values (None: no such field) and elevation field values."""
 
-    meta: dict[str, Any]
     fids: NDArray[Any] | None
     wkb: NDArray[Any]
-    fields: list[NDArray[Any]]
+    id_values: NDArray[Any] | None
+    elevations: NDArray[Any]
     start: int
-    asked: int | None
 
 
-def _read_features(path: Path, layer: str, start: int, asked: int | None) -> _FeatureRead:
-    """Up to ``asked`` features of ``layer`` from feature ``start`` on (every one when None)."""
-    with _as_source_error(path, layer):
-        meta, fids, wkb, fields = ogr_read(
-            path, layer=layer, return_fids=True, skip_features=start, max_features=asked
-        )
-    # pyogrio's read leaves a reference cycle (a closure over its chunk lists) that holds the features it read
-    # until the garbage collector comes by, which in a big process can take many reads: collect it now.
-    gc.collect(1)
-    return _FeatureRead(meta, fids, wkb, list(fields), start, asked)
+@contextmanager
+def _feature_stream(path: Path, layer: str) -> Iterator[tuple[dict[str, Any], Any]]:
+    """The layer's metadata (CRS, field names, FID column) and its features as a stream of Arrow batches of
+    :data:`ARROW_BATCH_FEATURES` features (GDAL keeps its reading position from batch to batch, so each
+    format is read in one pass)."""
+    with ExitStack() as stack:
+        with _as_source_error(path, layer):  # GeoJSON: GDAL reads the whole file once here, for its fields
+            meta, reader = stack.enter_context(
+                open_arrow(path, layer=layer, return_fids=True, batch_size=ARROW_BATCH_FEATURES, use_pyarrow=False)
+            )
+            stream = na.c_array_stream(reader)
+        yield meta, stream
+
+
+def _feature_reads(
+    stream: Any, meta: dict[str, Any], path: Path, layer: str, id_name: str | None, elev_name: str
+) -> Iterator[_FeatureRead]:
+    """The stream's features gathered into reads of about :data:`READ_VERTICES` vertices (judged by the size
+    of their WKB), each with the columns the contours need."""
+    schema = stream.get_schema()
+    names = [schema.child(i).name for i in range(schema.n_children)]
+    columns = {
+        "fids": names.index(meta["fid_column"]) if meta.get("fid_column") in names else None,
+        "wkb": len(names) - 1,  # pyogrio puts the geometry last
+        "id_values": None if id_name is None else names.index(id_name),
+        "elevations": names.index(elev_name),
+    }
+    limit = (READ_VERTICES or ASSEMBLE_BATCH_VERTICES) * WKB_VERTEX_BYTES
+    gathered: dict[str, list[Any]] = {key: [] for key in columns}
+    start = size = 0
+    batches = iter(stream)
+    while True:
+        with _as_source_error(path, layer):
+            batch = next(batches, None)
+        if batch is not None:
+            values = na.Array(batch)
+            with warnings.catch_warnings():  # the geometry's type is geoarrow.wkb: its binary storage is the WKB
+                warnings.simplefilter("ignore", UnregisteredExtensionWarning)
+                for key, col in columns.items():
+                    if col is not None:
+                        column = values.child(col).to_pylist()
+                        gathered[key].extend(column)
+                        if key == "wkb":
+                            size += sum(len(blob) for blob in column if blob is not None)
+        n = len(gathered["wkb"])
+        if n and (batch is None or size >= limit or n * WKB_VERTEX_BYTES >= limit):
+            yield _FeatureRead(
+                fids=None if columns["fids"] is None else _as_array(gathered["fids"]),
+                wkb=_as_array(gathered["wkb"]),
+                id_values=None if id_name is None else _as_array(gathered["id_values"]),
+                elevations=_as_array(gathered["elevations"]),
+                start=start,
+            )
+            start += n
+            gathered = {key: [] for key in columns}
+            size = 0
+        if batch is None:
+            return
+
+
+def _as_array(values: list[Any]) -> NDArray[Any]:
+    """Field values as pyogrio's plain reads give them: numbers as a float or integer array (a missing number as
+    NaN), anything else (text, bytes, a mixture) as an object array with None where missing."""
+    present = [v for v in values if v is not None]
+    if present and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in present):
+        if len(present) == len(values) and all(isinstance(v, int) for v in present):
+            return np.asarray(values, dtype=np.int64)
+        return np.asarray([math.nan if v is None else v for v in values], dtype=np.float64)
+    out = np.empty(len(values), dtype=object)
+    out[:] = values
+    return out
 
 
 @contextmanager
@@ -235,7 +278,7 @@ def _as_source_error(path: Path, layer: str | None) -> Iterator[None]:
         yield
     except DataLayerError as exc:
         raise SourceError(f"{path}: cannot open layer {layer!r} ({exc})") from exc
-    except (DataSourceError, RuntimeError, IndexError) as exc:
+    except (DataSourceError, RuntimeError, IndexError) as exc:  # nanoarrow's errors are RuntimeErrors
         raise SourceError(f"{path}: cannot read contours ({exc})") from exc
 
 
@@ -964,7 +1007,7 @@ def elevation_units(path: str | os.PathLike[str], elevation_field: str | None = 
     """
     path = Path(path)
     try:
-        meta, *_ = ogr_read(path, layer=str(list_layers(path)[0][0]), read_geometry=False, max_features=1)
+        meta = read_info(path, layer=str(list_layers(path)[0][0]))
     except (DataLayerError, DataSourceError, RuntimeError, IndexError) as exc:
         raise SourceError(f"{path}: cannot read contours ({exc})") from exc
     names = [str(n) for n in meta["fields"]]

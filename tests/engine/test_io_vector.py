@@ -577,8 +577,8 @@ def sample_lines(n: int) -> tuple[list[shapely.Geometry | None], list[float]]:
 def test_issue_12_a_file_read_in_batches_gives_the_contour_set_of_one_read(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, suffix: str
 ) -> None:
-    """GeoPackages and Shapefiles are read a few features at a time; the contours, their ids (FIDs, parts) and
-    the bad features with their reasons and order must be those of one read. GeoJSON is read in one go."""
+    """Every format is streamed a few features at a time; the contours, their ids (FIDs, parts) and the bad
+    features with their reasons and order must be those of one read of every feature."""
     import engine.io.vector as vector
 
     geoms, elevations = sample_lines(240)
@@ -594,23 +594,24 @@ def test_issue_12_a_file_read_in_batches_gives_the_contour_set_of_one_read(
         crs="EPSG:4326",
         geometry_type="MultiLineString" if suffix == ".shp" else "Unknown",
     )
+    reads: list[int] = []  # features in each read whose lines are made
+    real_explode = vector._explode_lines
+
+    def counted_explode(wkb: Any, *args: Any, **kwargs: Any) -> Any:
+        reads.append(len(wkb))
+        return real_explode(wkb, *args, **kwargs)
+
+    monkeypatch.setattr(vector, "_explode_lines", counted_explode)
+    monkeypatch.setattr(vector, "READ_VERTICES", 1 << 40)  # one read of every feature
     whole = read_source(path)
-    reads: list[int | None] = []
-    real_read = vector.ogr_read
-
-    def counted_read(*args: Any, **kwargs: Any) -> Any:
-        reads.append(kwargs["max_features"])
-        return real_read(*args, **kwargs)
-
-    monkeypatch.setattr(vector, "ogr_read", counted_read)
-    monkeypatch.setattr(vector, "FIRST_READ_FEATURES", 16)
+    assert reads == [240]
+    reads.clear()
+    monkeypatch.setattr(vector, "READ_VERTICES", None)
+    monkeypatch.setattr(vector, "ARROW_BATCH_FEATURES", 16)
     monkeypatch.setattr(vector, "ASSEMBLE_BATCH_VERTICES", 1500)
     batched = read_source(path)
 
-    if suffix == ".geojson":
-        assert reads == [None]  # a read past the first feature would parse the file again
-    else:
-        assert reads[0] == 16 and len(reads) > 5  # the bad features are in later reads
+    assert len(reads) > 5 and sum(reads) == 240, reads  # the bad features are in later reads
     fid = 1 if suffix == ".gpkg" else 0  # the FID of the first feature
     assert [(b.id, b.reason) for b in whole.bad_features] == [
         (170 + fid, "no geometry"),
