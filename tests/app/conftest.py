@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import socket
 import subprocess
 import sys
@@ -82,6 +83,15 @@ def built_store(tmp_path_factory: pytest.TempPathFactory, synthetic_path: Path) 
     path = tmp_path_factory.mktemp("store") / "ccsm.sqlite"
     build_dataset(CCSStore(path), SourceSpec(synthetic_path, "hills", "hills"), workers=1)
     return path
+
+
+@pytest.fixture()
+def store(tmp_path: Path, built_store: Path) -> Path:
+    """A private copy of the store holding 'hills'."""
+    CCSStore(built_store)._con().execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    copy = tmp_path / "ccsm.sqlite"
+    shutil.copy(built_store, copy)
+    return copy
 
 
 def make_settings(store: Path, sources: list[Path], **kw: object) -> Settings:

@@ -9,12 +9,10 @@ A worker reads its store through memory mapping when configured to (``CCSM_STORE
 
 from __future__ import annotations
 
-import shutil
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from app.render_jobs import MorphJob, RenderConfig, TileJob, Worker, run_job
 from engine.serve.datasets import SourceSpec, build_dataset
@@ -25,15 +23,6 @@ from tests.app.helpers import tile_for
 
 #: Contour memory too small to hold 'hills' whole: every tile is packed from the stored pieces it meets.
 SMALL_CONTOUR_CACHE = 1 << 16
-
-
-@pytest.fixture()
-def store(tmp_path: Path, built_store: Path) -> Path:
-    """A private copy of the store holding 'hills'."""
-    CCSStore(built_store)._con().execute("PRAGMA wal_checkpoint(TRUNCATE)")
-    copy = tmp_path / "ccsm.sqlite"
-    shutil.copy(built_store, copy)
-    return copy
 
 
 def config(store: Path, head_mb: float = 8) -> RenderConfig:

@@ -9,7 +9,6 @@ drawn again, and it is the new data's tile.
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import pytest
@@ -21,15 +20,6 @@ from engine.serve.renderer import TileOptions
 from engine.store.sqlite import CCSStore
 from tests.app.conftest import LAT0, LON0, synthetic_features, write_geojson
 from tests.app.helpers import tile_for
-
-
-@pytest.fixture()
-def store(tmp_path: Path, built_store: Path) -> Path:
-    """A private copy of the store holding 'hills'."""
-    CCSStore(built_store)._con().execute("PRAGMA wal_checkpoint(TRUNCATE)")
-    copy = tmp_path / "ccsm.sqlite"
-    shutil.copy(built_store, copy)
-    return copy
 
 
 @pytest.fixture()
