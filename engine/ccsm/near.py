@@ -156,3 +156,94 @@ def _segment_to_segment(ax, ay, bx, by, cx, cy, dx, dy):  # pragma: no cover - c
             min(_point_to_segment(cx, cy, ax, ay, bx, by), _point_to_segment(dx, dy, ax, ay, bx, by)),
         ),
     )
+
+
+#: Segments per chunk of :func:`lines_within`: chunks whose boxes are apart are skipped whole, so two long lines
+#: cost about (n / 16) × (m / 16) box tests, not n × m distances.
+WITHIN_CHUNK = 16
+
+
+def lines_within(
+    points: NDArray[np.float64],
+    first: NDArray[np.intp],
+    last: NDArray[np.intp],
+    p: NDArray[np.intp],
+    q: NDArray[np.intp],
+    d: float,
+) -> NDArray[np.bool_]:
+    """Whether lines ``p[k]`` and ``q[k]`` of ``points`` (a line: the polyline of points first..last, at least
+    two) come within ``d`` of each other, for every k: what ``shapely.dwithin`` decides for their linestrings.
+
+    GEOS decides it from the same segment-to-segment distances (its facet distance), stopping at the first pair
+    of segments no farther apart than ``d``; so does this, with each distance from :func:`_segment_to_segment`
+    (shapely's own, bit for bit). Chunks and segments whose boxes are more than ``2 d`` apart are skipped: the
+    margin keeps rounding in a box from ever skipping a pair GEOS would count. A line of one point repeated is
+    that point here, as in GEOS's plain test; GEOS's prepared test answers for such lines vary with what the
+    prepared line was asked before (no contour is one: ``ccs.check_contour`` refuses them).
+
+    >>> pts = np.array([[0.0, 0], [4, 0], [0, 3], [4, 3], [2, 0.5], [2, 1]])
+    >>> lines_within(pts, np.array([0, 2, 4]), np.array([1, 3, 5]), np.array([0, 0]), np.array([1, 2]), 0.5).tolist()
+    [False, True]
+    """
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    out = np.empty(len(p), dtype=np.bool_)
+    first, last = np.asarray(first, np.intp), np.asarray(last, np.intp)
+    _lines_within(points, first, last, np.asarray(p, np.intp), np.asarray(q, np.intp), float(d), WITHIN_CHUNK, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _lines_within(pts, first, last, p, q, d, chunk, out):  # pragma: no cover - compiled
+    reach = 2.0 * d
+    for k in range(len(p)):
+        out[k] = _within(pts, first[p[k]], last[p[k]], first[q[k]], last[q[k]], d, reach, chunk)
+
+
+@njit(cache=True, nogil=True)
+def _box(pts, lo, hi):  # pragma: no cover - compiled
+    """(minx, miny, maxx, maxy) of points lo..hi."""
+    x0, y0, x1, y1 = pts[lo, 0], pts[lo, 1], pts[lo, 0], pts[lo, 1]
+    for i in range(lo + 1, hi + 1):
+        x0 = min(x0, pts[i, 0])
+        y0 = min(y0, pts[i, 1])
+        x1 = max(x1, pts[i, 0])
+        y1 = max(y1, pts[i, 1])
+    return x0, y0, x1, y1
+
+
+@njit(cache=True, nogil=True)
+def _apart(ax0, ay0, ax1, ay1, bx0, by0, bx1, by1, reach):  # pragma: no cover - compiled
+    """Are two boxes more than ``reach`` apart along x or along y?"""
+    return bx0 - ax1 > reach or ax0 - bx1 > reach or by0 - ay1 > reach or ay0 - by1 > reach
+
+
+@njit(cache=True, nogil=True)
+def _within(pts, a0, a1, b0, b1, d, reach, chunk):  # pragma: no cover - compiled
+    """Does some segment of points a0..a1 lie within ``d`` of some segment of points b0..b1?"""
+    ax0, ay0, ax1, ay1 = _box(pts, a0, a1)
+    bx0, by0, bx1, by1 = _box(pts, b0, b1)
+    if _apart(ax0, ay0, ax1, ay1, bx0, by0, bx1, by1, reach):
+        return False
+    nb = (b1 - b0 + chunk - 1) // chunk
+    boxes = np.empty((nb, 4))
+    for c in range(nb):
+        boxes[c, 0], boxes[c, 1], boxes[c, 2], boxes[c, 3] = _box(pts, b0 + c * chunk, min(b0 + (c + 1) * chunk, b1))
+    for ca in range(a0, a1, chunk):
+        ce = min(ca + chunk, a1)
+        cx0, cy0, cx1, cy1 = _box(pts, ca, ce)
+        if _apart(cx0, cy0, cx1, cy1, bx0, by0, bx1, by1, reach):
+            continue
+        for c in range(nb):
+            if _apart(cx0, cy0, cx1, cy1, boxes[c, 0], boxes[c, 1], boxes[c, 2], boxes[c, 3], reach):
+                continue
+            cb = b0 + c * chunk
+            for i in range(ca, ce):
+                sx0, sy0, sx1, sy1 = _box(pts, i, i + 1)
+                for j in range(cb, min(cb + chunk, b1)):
+                    tx0, ty0, tx1, ty1 = _box(pts, j, j + 1)
+                    if _apart(sx0, sy0, sx1, sy1, tx0, ty0, tx1, ty1, reach):
+                        continue
+                    ax, ay, bx, by = pts[i, 0], pts[i, 1], pts[i + 1, 0], pts[i + 1, 1]
+                    if _segment_to_segment(ax, ay, bx, by, pts[j, 0], pts[j, 1], pts[j + 1, 0], pts[j + 1, 1]) <= d:
+                        return True
+    return False
