@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from engine.ccsm.near import box_pairs
+from engine.ccsm.near import boxes_meeting
 from engine.ccsm.spool import Spool, surface_of
 from engine.ccsm.topology import InputTouches, concatenated_ranges, new_contact_pairs, per_piece, piece_ranges
 from engine.heap import release_free_memory
@@ -213,8 +213,8 @@ def spatial_blocks(
         # Only the pieces filed near this block are compared with its own (on the arrays: a geometry per box
         # had cost more than the comparisons).
         candidates = buckets.near(piece_boxes[own])
-        _, hit = box_pairs(piece_boxes[own], piece_boxes[candidates])
-        blocks.append(_block(own, candidates[hit], first, last, owner, start))
+        met = boxes_meeting(piece_boxes[own], piece_boxes[candidates])
+        blocks.append(_block(own, candidates[met], first, last, owner, start))
     return blocks
 
 

@@ -8,7 +8,7 @@ import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from engine.ccsm.near import box_pairs, lines_within, piece_gaps
+from engine.ccsm.near import box_pairs, boxes_meeting, lines_within, piece_gaps
 
 
 def _strtree_pairs(a: np.ndarray, b: np.ndarray) -> set[tuple[int, int]]:
@@ -43,6 +43,22 @@ def test_box_pairs_touching_and_empty() -> None:
     touching = np.array([[1.0, 1.0, 2.0, 2.0], [1.0, -1.0, 1.0, 0.0], [1.0 + 1e-12, 0.0, 2.0, 1.0]])
     assert box_pairs(unit, touching)[1].tolist() == [0, 1]  # corner and edge touches meet; a gap does not
     assert box_pairs(unit, np.zeros((0, 4)))[0].tolist() == []
+
+
+@pytest.mark.parametrize("grid", [False, True])
+def test_boxes_meeting_are_the_strtree_boxes_met(grid: bool) -> None:
+    """The mask of the boxes of b that meet some box of a is the set of b's boxes in the STRtree's pairs (edge
+    and corner touches, shared minx, point and segment boxes on the grid), sparse and crowded."""
+    rng = np.random.default_rng(4)
+    for n in (5, 40, 150, 150):
+        a, b = _random_boxes(rng, n, grid), _random_boxes(rng, 200, grid)
+        met = boxes_meeting(a, b)
+        assert set(np.flatnonzero(met).tolist()) == {j for _, j in _strtree_pairs(a, b)}
+    assert met.any() and not met.all()
+    unit = np.array([[0.0, 0.0, 1.0, 1.0]])
+    touching = np.array([[1.0, 1.0, 2.0, 2.0], [1.0, -1.0, 1.0, 0.0], [1.0 + 1e-12, 0.0, 2.0, 1.0], [-1, -1, 2, 2]])
+    assert boxes_meeting(unit, touching).tolist() == [True, True, False, True]
+    assert boxes_meeting(np.zeros((0, 4)), touching).tolist() == [False] * 4
 
 
 def _pieces(rng: np.random.Generator, kind: str) -> np.ndarray:
