@@ -113,9 +113,14 @@ def piece_gaps(
     last: NDArray[np.intp],
     p: NDArray[np.intp],
     q: NDArray[np.intp],
+    limit: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64]:
     """Distance between pieces ``p[k]`` and ``q[k]`` of ``points`` (a piece: the polyline of points first..last),
     for every k: what ``shapely.distance`` gives for their linestrings.
+
+    With ``limit``, only the gaps up to ``limit[k]`` are wanted: those are the same numbers, every other is some
+    number above its limit (a pair of pieces whose boxes are farther apart, and every pair of segments that is,
+    is not measured; most of the crossing check's candidate pairs are such).
 
     >>> pts = np.array([[0.0, 0], [4, 0], [0, 3], [4, 3], [2, -1], [2, 1]])
     >>> piece_gaps(pts, np.array([0, 2, 4]), np.array([1, 3, 5]), np.array([0, 0]), np.array([1, 2])).tolist()
@@ -123,15 +128,26 @@ def piece_gaps(
     """
     points = np.ascontiguousarray(points, dtype=np.float64)
     out = np.empty(len(p), dtype=np.float64)
-    _piece_gaps(points, np.asarray(first, np.intp), np.asarray(last, np.intp), np.asarray(p), np.asarray(q), out)
+    # A hair above each limit: rounding in a box's distance must never skip a pair of segments at the limit.
+    bound = np.full(len(p), np.inf) if limit is None else np.asarray(limit, np.float64) * (1 + 1e-9) + 1e-9
+    first, last = np.asarray(first, np.intp), np.asarray(last, np.intp)
+    _piece_gaps(points, first, last, np.asarray(p), np.asarray(q), bound, out)
     return out
 
 
 @njit(cache=True, nogil=True)
-def _piece_gaps(pts, first, last, p, q, out):  # pragma: no cover - compiled
+def _piece_gaps(pts, first, last, p, q, bound, out):  # pragma: no cover - compiled
     for k in range(len(p)):
-        best = np.inf
+        best = bound[k]
         a0, a1, b0, b1 = first[p[k]], last[p[k]], first[q[k]], last[q[k]]
+        if best < np.inf:  # pieces whose boxes are apart by more than the bound: no segment of theirs is nearer
+            ax0, ay0, ax1, ay1 = _box(pts, a0, a1)
+            bx0, by0, bx1, by1 = _box(pts, b0, b1)
+            dx = max(0.0, max(bx0 - ax1, ax0 - bx1))
+            dy = max(0.0, max(by0 - ay1, ay0 - by1))
+            if dx * dx + dy * dy > best * best:
+                out[k] = best
+                continue
         for i in range(a0, a1):
             sx0 = min(pts[i, 0], pts[i + 1, 0])
             sx1 = max(pts[i, 0], pts[i + 1, 0])

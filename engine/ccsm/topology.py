@@ -306,8 +306,11 @@ def _close_enough(
     move = np.linalg.norm(top - base, axis=1)
     reach = per_piece(np.maximum, move[:, None], first, last)[:, 0]
     # INPUT_TOUCH_M of slack: a pair exactly at the limit is kept, whatever the rounding of the distance.
-    gap = piece_gaps(base, first, last, p, q)  # shapely.distance of the pieces' base rows, without geometries
-    near = gap <= reach[p] + reach[q] + INPUT_TOUCH_M
+    limit = reach[p] + reach[q] + INPUT_TOUCH_M
+    # shapely.distance of the pieces' base rows, without geometries; measured only up to the limit (above it,
+    # some number above it), since the pairs beyond are dropped whatever their distance
+    gap = piece_gaps(base, first, last, p, q, limit)
+    near = gap <= limit
     return p[near], q[near], gap[near], reach
 
 

@@ -95,6 +95,31 @@ def test_piece_gaps_are_geos_distances(kind: str) -> None:
         assert (gaps == 0).any() and (gaps > 0).any()  # the cases are mixed: meeting and apart pairs
 
 
+@pytest.mark.parametrize("far", [False, True])
+def test_piece_gaps_up_to_a_limit_are_the_gaps(far: bool) -> None:
+    """With a limit per pair, every gap up to its limit is the gap itself, bit for bit, and every other one is
+    above its limit: so the pairs kept (gap <= limit) and their gaps are those of the full measure. Limits are
+    set exactly at, a rounding step either side of, and well around the gaps, on pieces of every kind."""
+    rng = np.random.default_rng(17)
+    kinds = ["random", "grid", "collinear", "degenerate"]
+    lines = [_pieces(rng, kinds[k % 4]) + (rng.normal(0, 4, 2) if k % 3 else 0) for k in range(120)]
+    if far:
+        lines = [line + [500_000.0, 4_000_000.0] for line in lines]
+    sizes = np.array([len(x) for x in lines])
+    first = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    last = first + sizes - 1
+    p, q = rng.integers(0, 120, 4000), rng.integers(0, 120, 4000)
+    points = np.concatenate(lines)
+    gaps = piece_gaps(points, first, last, p, q)
+    step = rng.choice([0.0, 1.0, -1.0, 0.0], len(p))
+    limit = np.where(rng.random(len(p)) < 0.6, np.nextafter(gaps, gaps + step), gaps * rng.uniform(0, 2, len(p)))
+    limited = piece_gaps(points, first, last, p, q, limit)
+    kept = gaps <= limit
+    assert np.array_equal(limited <= limit, kept)
+    assert np.array_equal(limited[kept], gaps[kept])
+    assert kept.any() and (~kept).any() and (gaps[kept] > 0).any()
+
+
 def test_piece_gaps_far_coordinates() -> None:
     """At UTM-sized coordinates (where rounding differs most from small ones) the gaps are still GEOS's."""
     rng = np.random.default_rng(11)
