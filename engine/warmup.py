@@ -41,12 +41,17 @@ def warm_up() -> float:
 
 
 def _check_build_crossings(line: np.ndarray) -> None:
-    """The build's crossing check over the ladder's steps, on a line and a copy of it that passes through it."""
-    from engine.ccsm.topology import SweepIndex
+    """The build's crossing check over the ladder's steps, on a line and a copy of it that passes through it,
+    the blocks' box test and the input's touch test."""
+    from engine.ccsm.near import boxes_meeting
+    from engine.ccsm.topology import InputTouches, SweepIndex
 
     below, above = line - [0.0, 5.0], line + [0.0, 5.0]
     index = SweepIndex.of([line, below], [line, above])
     index.contacts_in_steps(np.zeros((2, 1)), np.ones((2, 1)), np.ones((2, 1), dtype=bool))
+    boxes = np.array([[*x.min(axis=0), *x.max(axis=0)] for x in (line, below)])
+    boxes_meeting(boxes, boxes)
+    _ = (0, 1) in InputTouches([line, below])
 
 
 def _check_tile_topology() -> None:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from engine.ccsm.near import box_pairs
+from engine.ccsm.near import boxes_meeting
 from engine.ccsm.spool import Spool, surface_of
 from engine.ccsm.topology import InputTouches, concatenated_ranges, new_contact_pairs, per_piece, piece_ranges
 from engine.heap import release_free_memory
@@ -213,8 +213,8 @@ def spatial_blocks(
         # Only the pieces filed near this block are compared with its own (on the arrays: a geometry per box
         # had cost more than the comparisons).
         candidates = buckets.near(piece_boxes[own])
-        _, hit = box_pairs(piece_boxes[own], piece_boxes[candidates])
-        blocks.append(_block(own, candidates[hit], first, last, owner, start))
+        met = boxes_meeting(piece_boxes[own], piece_boxes[candidates])
+        blocks.append(_block(own, candidates[met], first, last, owner, start))
     return blocks
 
 
@@ -327,12 +327,17 @@ class _SpoolBases:
 
 
 def _block_tasks(
-    blocks: Sequence[Block], spool: Spool, ladder: NDArray[np.float64], steps: list[int]
+    blocks: Sequence[Block],
+    spool: Spool,
+    ladder: NDArray[np.float64],
+    steps: list[int],
+    cache: NearCache | None = None,
 ) -> Iterator[tuple[Any, ...]]:
     """One task per block, each block's surfaces read from the spool only when its task is sent: its own
     surfaces as the spool keeps them, every other one cut to its near stretch here, so that a long contour
-    passing by is not shipped whole to every block it passes (a task's size follows the block's rows)."""
-    cache = _NearCache(spool, NEAR_CACHE_BYTES)
+    passing by is not shipped whole to every block it passes (a task's size follows the block's rows). The
+    surfaces are read through ``cache`` (None: a new one)."""
+    cache = cache if cache is not None else NearCache(spool)
     for b in blocks:
         near: list[CCS | bytes] = []
         # A few surfaces read at a time: whole, the long contours passing by a block can weigh far more than
@@ -348,33 +353,45 @@ def _block_tasks(
         yield near, np.flatnonzero(b.own).tolist(), ladder, steps
 
 
-#: Bytes of surfaces :class:`_NearCache` keeps while one check's block tasks are made.
+#: Bytes of surfaces :class:`NearCache` keeps while block tasks are made.
 NEAR_CACHE_BYTES = 32 << 20
 
 
-class _NearCache:
-    """The surfaces read for one check's blocks, the most recently used kept up to ``budget`` bytes (as the spool
-    keeps them, and opened once a stretch of them is cut): neighbouring blocks share most of their near
-    contours, and on dense data reading and opening them again for every block cost more than the checks."""
+class NearCache:
+    """The surfaces read for the blocks' tasks, the most recently used kept up to ``budget`` bytes (as the spool
+    keeps them, and opened once a stretch of them is cut; None: :data:`NEAR_CACHE_BYTES`): neighbouring blocks
+    share most of their near contours, and on dense data reading and opening them again for every block cost
+    more than the checks. Kept across the repair's checks, each re-check reads again only what was rebuilt
+    (:meth:`forget`) or evicted: a new cache per check had read most surfaces of a round's blocks again.
+    """
 
-    def __init__(self, spool: Spool, budget: int) -> None:
+    def __init__(self, spool: Spool, budget: int | None = None) -> None:
         self.spool = spool
-        self.budget = budget
+        self.budget = NEAR_CACHE_BYTES if budget is None else budget
         self.items: OrderedDict[int, list[Any]] = OrderedDict()  # number -> [payload, opened surface or None]
         self.size = 0
 
     def payloads(self, numbers: list[int]) -> list[CCS | bytes]:
         """The surfaces ``numbers`` as the spool keeps them (read only those not kept)."""
-        missing = sorted(set(numbers) - self.items.keys())
+        # Each number looked up on its own: ``set - dict.keys()`` walks every key kept (thousands on dense data),
+        # which had cost more than the reads it saved.
+        missing = sorted({n for n in numbers if n not in self.items})
         for n, payload in zip(missing, self.spool.get_payloads(missing), strict=True) if missing else ():
             self.items[n] = [payload, None]
             self.size += _payload_bytes(payload)
         for n in numbers:
             self.items.move_to_end(n)
         while self.size > self.budget and len(self.items) > len(numbers):  # never the ones just asked for
-            _, (payload, opened) = self.items.popitem(last=False)
-            self.size -= _payload_bytes(payload) + (0 if opened is None else _payload_bytes(opened))
+            _, entry = self.items.popitem(last=False)
+            self.size -= _entry_bytes(entry)
         return [self.items[n][0] for n in numbers]
+
+    def forget(self, numbers: Iterable[int]) -> None:
+        """Drop surfaces ``numbers`` (replaced in the spool since they were read)."""
+        for n in numbers:
+            entry = self.items.pop(n, None)
+            if entry is not None:
+                self.size -= _entry_bytes(entry)
 
     def surface(self, number: int) -> CCS:
         """Surface ``number`` opened (it must have been asked for by :meth:`payloads` just before)."""
@@ -390,6 +407,13 @@ class _NearCache:
 
 def _payload_bytes(payload: CCS | bytes) -> int:
     return len(payload) if isinstance(payload, bytes) else payload.base.nbytes + payload.top.nbytes
+
+
+def _entry_bytes(entry: list[Any]) -> int:
+    """What a :class:`NearCache` entry [payload, opened surface or None] counts for (a surface that is its own
+    payload, as a memory spool keeps it, only once)."""
+    payload, opened = entry
+    return _payload_bytes(payload) + (0 if opened is None or opened is payload else _payload_bytes(opened))
 
 
 #: Surfaces of a block read from the spool at a time while its task is made.
@@ -420,6 +444,7 @@ def find_crossings_by_block(
     executor: Executor | None = None,
     per_block: int | None = None,
     touches: InputTouches | None = None,
+    cache: NearCache | None = None,
 ) -> set[int]:
     """Indices of the surfaces in a new contact (with one of ``only``, if given), found block by block:
     the same answer as :func:`~engine.ccsm.topology.find_new_crossings` over the whole set with the input's
@@ -445,6 +470,9 @@ def find_crossings_by_block(
     touches
         The input's touching pairs, asked pair by pair (kept across calls so each pair is asked once); None =
         a new one on the spool's base rows.
+    cache
+        The surfaces read for earlier checks (kept across calls; the caller forgets the ones it replaces in the
+        spool); None = a new one.
     """
     checked = None if only is None else np.array(sorted(only), dtype=np.intp)
     if per_block is None:
@@ -452,7 +480,7 @@ def find_crossings_by_block(
     blocks = spatial_blocks(boxes, pieces, checked, per_block)
     touches = touches if touches is not None else input_touches(spool)
     found: set[int] = set()
-    tasks = _block_tasks(blocks, spool, ladder, list(steps))
+    tasks = _block_tasks(blocks, spool, ladder, list(steps), cache)
     checks = map_ordered(executor, block_contacts, tasks, weight=_task_bytes, budget=BLOCK_TASK_BUDGET_BYTES)
     for block, pairs in zip(blocks, checks, strict=True):
         # Two stretches of one contour meet where they join (the input touch test would say so too).

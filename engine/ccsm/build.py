@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
-from engine.ccsm.blocks import PieceIndex, find_crossings_by_block, input_touches, surface_boxes
+from engine.ccsm.blocks import NearCache, PieceIndex, find_crossings_by_block, input_touches, surface_boxes
 from engine.ccsm.ccs import CCS, build_ccs, check_contour, slice_area
 from engine.ccsm.regression import ScaleModel, fit_scale_model
 from engine.ccsm.spool import MemorySpool, Spool
@@ -343,9 +343,12 @@ def resolve_crossings(
     """
     steps = checked_ladder_steps(model)
     touches = input_touches(spool)
+    cache = NearCache(spool)  # the surfaces read by one check, kept for the next: a re-check reads what was rebuilt
     factors = np.ones(len(inputs))  # the first build uses the full target tolerance
     changed: set[int] = set()
-    involved = find_crossings_by_block(spool, boxes, pieces, model.ladder, steps, None, executor, touches=touches)
+    involved = find_crossings_by_block(
+        spool, boxes, pieces, model.ladder, steps, None, executor, touches=touches, cache=cache
+    )
     round_ = 0
     while involved:
         factor = REPAIR_FACTORS[min(round_, len(REPAIR_FACTORS) - 1)]
@@ -367,9 +370,12 @@ def resolve_crossings(
             if len(batch) >= REPAIR_KEEP_BATCH:
                 _keep(batch, spool, boxes, pieces)
         _keep(batch, spool, boxes, pieces)
+        cache.forget(rebuilt_now)  # replaced in the spool
         # Only the rebuilt contours can have made new crossings (or still have old ones).
         involved = (
-            find_crossings_by_block(spool, boxes, pieces, model.ladder, steps, rebuilt_now, executor, touches=touches)
+            find_crossings_by_block(
+                spool, boxes, pieces, model.ladder, steps, rebuilt_now, executor, touches=touches, cache=cache
+            )
             if rebuilt_now
             else set()
         )

@@ -66,15 +66,61 @@ def _scan(box, others, order, minx, k, at, box_is_a, ia, ib, n, fill):  # pragma
     return n
 
 
+def boxes_meeting(a: NDArray[np.floating], b: NDArray[np.floating]) -> NDArray[np.bool_]:
+    """Whether each box ``b[j]`` meets some box of ``a`` (closed boxes: touching counts): the js of
+    :func:`box_pairs` as a mask, without listing the pairs (a block asks only which pieces its own ones meet).
+
+    The same sweep along x, from each side: every ``b`` box whose minx lies in an ``a`` box's x range, then, for
+    the ``b`` boxes not yet met, every ``a`` box whose minx lies in theirs, stopping at the first that meets.
+
+    >>> boxes_meeting(np.array([[0.0, 0, 1, 1], [5, 5, 6, 6]]), np.array([[1.0, 1, 2, 2], [2, 0, 3, 1], [0, 0, 6, 0]]))
+    array([ True, False,  True])
+    """
+    a = np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 4)
+    b = np.ascontiguousarray(b, dtype=np.float64).reshape(-1, 4)
+    oa = np.argsort(a[:, 0], kind="stable")
+    ob = np.argsort(b[:, 0], kind="stable")
+    met = np.zeros(len(b), dtype=np.bool_)
+    _mark_met(a, b, oa, ob, a[oa, 0], b[ob, 0], met)
+    return met
+
+
+@njit(cache=True, nogil=True)
+def _mark_met(a, b, oa, ob, ax, bx, met):  # pragma: no cover - compiled
+    """Set ``met[j]`` for every ``b`` box that meets an ``a`` box; ``ax``, ``bx`` the sorted minx."""
+    for i in range(len(a)):  # b's minx in [a's minx, a's maxx]
+        k = np.searchsorted(bx, a[i, 0])
+        while k < len(bx) and bx[k] <= a[i, 2]:
+            j = ob[k]
+            if not met[j] and b[j, 1] <= a[i, 3] and a[i, 1] <= b[j, 3]:
+                met[j] = True
+            k += 1
+    for j in range(len(b)):  # a's minx in (b's minx, b's maxx]: the boxes not met above
+        if met[j]:
+            continue
+        k = np.searchsorted(ax, b[j, 0], side="right")
+        while k < len(ax) and ax[k] <= b[j, 2]:
+            i = oa[k]
+            if a[i, 1] <= b[j, 3] and b[j, 1] <= a[i, 3]:
+                met[j] = True
+                break
+            k += 1
+
+
 def piece_gaps(
     points: NDArray[np.float64],
     first: NDArray[np.intp],
     last: NDArray[np.intp],
     p: NDArray[np.intp],
     q: NDArray[np.intp],
+    limit: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64]:
     """Distance between pieces ``p[k]`` and ``q[k]`` of ``points`` (a piece: the polyline of points first..last),
     for every k: what ``shapely.distance`` gives for their linestrings.
+
+    With ``limit``, only the gaps up to ``limit[k]`` are wanted: those are the same numbers, every other is some
+    number above its limit (a pair of pieces whose boxes are farther apart, and every pair of segments that is,
+    is not measured; most of the crossing check's candidate pairs are such).
 
     >>> pts = np.array([[0.0, 0], [4, 0], [0, 3], [4, 3], [2, -1], [2, 1]])
     >>> piece_gaps(pts, np.array([0, 2, 4]), np.array([1, 3, 5]), np.array([0, 0]), np.array([1, 2])).tolist()
@@ -82,15 +128,26 @@ def piece_gaps(
     """
     points = np.ascontiguousarray(points, dtype=np.float64)
     out = np.empty(len(p), dtype=np.float64)
-    _piece_gaps(points, np.asarray(first, np.intp), np.asarray(last, np.intp), np.asarray(p), np.asarray(q), out)
+    # A hair above each limit: rounding in a box's distance must never skip a pair of segments at the limit.
+    bound = np.full(len(p), np.inf) if limit is None else np.asarray(limit, np.float64) * (1 + 1e-9) + 1e-9
+    first, last = np.asarray(first, np.intp), np.asarray(last, np.intp)
+    _piece_gaps(points, first, last, np.asarray(p), np.asarray(q), bound, out)
     return out
 
 
 @njit(cache=True, nogil=True)
-def _piece_gaps(pts, first, last, p, q, out):  # pragma: no cover - compiled
+def _piece_gaps(pts, first, last, p, q, bound, out):  # pragma: no cover - compiled
     for k in range(len(p)):
-        best = np.inf
+        best = bound[k]
         a0, a1, b0, b1 = first[p[k]], last[p[k]], first[q[k]], last[q[k]]
+        if best < np.inf:  # pieces whose boxes are apart by more than the bound: no segment of theirs is nearer
+            ax0, ay0, ax1, ay1 = _box(pts, a0, a1)
+            bx0, by0, bx1, by1 = _box(pts, b0, b1)
+            dx = max(0.0, max(bx0 - ax1, ax0 - bx1))
+            dy = max(0.0, max(by0 - ay1, ay0 - by1))
+            if dx * dx + dy * dy > best * best:
+                out[k] = best
+                continue
         for i in range(a0, a1):
             sx0 = min(pts[i, 0], pts[i + 1, 0])
             sx1 = max(pts[i, 0], pts[i + 1, 0])
@@ -156,3 +213,94 @@ def _segment_to_segment(ax, ay, bx, by, cx, cy, dx, dy):  # pragma: no cover - c
             min(_point_to_segment(cx, cy, ax, ay, bx, by), _point_to_segment(dx, dy, ax, ay, bx, by)),
         ),
     )
+
+
+#: Segments per chunk of :func:`lines_within`: chunks whose boxes are apart are skipped whole, so two long lines
+#: cost about (n / 16) × (m / 16) box tests, not n × m distances.
+WITHIN_CHUNK = 16
+
+
+def lines_within(
+    points: NDArray[np.float64],
+    first: NDArray[np.intp],
+    last: NDArray[np.intp],
+    p: NDArray[np.intp],
+    q: NDArray[np.intp],
+    d: float,
+) -> NDArray[np.bool_]:
+    """Whether lines ``p[k]`` and ``q[k]`` of ``points`` (a line: the polyline of points first..last, at least
+    two) come within ``d`` of each other, for every k: what ``shapely.dwithin`` decides for their linestrings.
+
+    GEOS decides it from the same segment-to-segment distances (its facet distance), stopping at the first pair
+    of segments no farther apart than ``d``; so does this, with each distance from :func:`_segment_to_segment`
+    (shapely's own, bit for bit). Chunks and segments whose boxes are more than ``2 d`` apart are skipped: the
+    margin keeps rounding in a box from ever skipping a pair GEOS would count. A line of one point repeated is
+    that point here, as in GEOS's plain test; GEOS's prepared test answers for such lines vary with what the
+    prepared line was asked before (no contour is one: ``ccs.check_contour`` refuses them).
+
+    >>> pts = np.array([[0.0, 0], [4, 0], [0, 3], [4, 3], [2, 0.5], [2, 1]])
+    >>> lines_within(pts, np.array([0, 2, 4]), np.array([1, 3, 5]), np.array([0, 0]), np.array([1, 2]), 0.5).tolist()
+    [False, True]
+    """
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    out = np.empty(len(p), dtype=np.bool_)
+    first, last = np.asarray(first, np.intp), np.asarray(last, np.intp)
+    _lines_within(points, first, last, np.asarray(p, np.intp), np.asarray(q, np.intp), float(d), WITHIN_CHUNK, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _lines_within(pts, first, last, p, q, d, chunk, out):  # pragma: no cover - compiled
+    reach = 2.0 * d
+    for k in range(len(p)):
+        out[k] = _within(pts, first[p[k]], last[p[k]], first[q[k]], last[q[k]], d, reach, chunk)
+
+
+@njit(cache=True, nogil=True)
+def _box(pts, lo, hi):  # pragma: no cover - compiled
+    """(minx, miny, maxx, maxy) of points lo..hi."""
+    x0, y0, x1, y1 = pts[lo, 0], pts[lo, 1], pts[lo, 0], pts[lo, 1]
+    for i in range(lo + 1, hi + 1):
+        x0 = min(x0, pts[i, 0])
+        y0 = min(y0, pts[i, 1])
+        x1 = max(x1, pts[i, 0])
+        y1 = max(y1, pts[i, 1])
+    return x0, y0, x1, y1
+
+
+@njit(cache=True, nogil=True)
+def _apart(ax0, ay0, ax1, ay1, bx0, by0, bx1, by1, reach):  # pragma: no cover - compiled
+    """Are two boxes more than ``reach`` apart along x or along y?"""
+    return bx0 - ax1 > reach or ax0 - bx1 > reach or by0 - ay1 > reach or ay0 - by1 > reach
+
+
+@njit(cache=True, nogil=True)
+def _within(pts, a0, a1, b0, b1, d, reach, chunk):  # pragma: no cover - compiled
+    """Does some segment of points a0..a1 lie within ``d`` of some segment of points b0..b1?"""
+    ax0, ay0, ax1, ay1 = _box(pts, a0, a1)
+    bx0, by0, bx1, by1 = _box(pts, b0, b1)
+    if _apart(ax0, ay0, ax1, ay1, bx0, by0, bx1, by1, reach):
+        return False
+    nb = (b1 - b0 + chunk - 1) // chunk
+    boxes = np.empty((nb, 4))
+    for c in range(nb):
+        boxes[c, 0], boxes[c, 1], boxes[c, 2], boxes[c, 3] = _box(pts, b0 + c * chunk, min(b0 + (c + 1) * chunk, b1))
+    for ca in range(a0, a1, chunk):
+        ce = min(ca + chunk, a1)
+        cx0, cy0, cx1, cy1 = _box(pts, ca, ce)
+        if _apart(cx0, cy0, cx1, cy1, bx0, by0, bx1, by1, reach):
+            continue
+        for c in range(nb):
+            if _apart(cx0, cy0, cx1, cy1, boxes[c, 0], boxes[c, 1], boxes[c, 2], boxes[c, 3], reach):
+                continue
+            cb = b0 + c * chunk
+            for i in range(ca, ce):
+                sx0, sy0, sx1, sy1 = _box(pts, i, i + 1)
+                for j in range(cb, min(cb + chunk, b1)):
+                    tx0, ty0, tx1, ty1 = _box(pts, j, j + 1)
+                    if _apart(sx0, sy0, sx1, sy1, tx0, ty0, tx1, ty1, reach):
+                        continue
+                    ax, ay, bx, by = pts[i, 0], pts[i, 1], pts[i + 1, 0], pts[i + 1, 1]
+                    if _segment_to_segment(ax, ay, bx, by, pts[j, 0], pts[j, 1], pts[j + 1, 0], pts[j + 1, 1]) <= d:
+                        return True
+    return False

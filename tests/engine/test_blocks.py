@@ -207,3 +207,54 @@ def test_block_tasks_are_the_same_whatever_the_near_cache_keeps(tmp_path, monkey
         assert sorted(reads) == sorted(every)
     else:
         assert len(reads) > len(every)  # read again once evicted
+
+
+def test_a_near_cache_kept_across_checks_reads_what_was_replaced(tmp_path) -> None:
+    """The repair keeps one cache of surfaces across its checks: a surface replaced in the spool and forgotten
+    is read again (a re-check must see the rebuilt rows), the others are not, and its bytes stay counted."""
+    from engine.ccsm.blocks import NearCache
+    from engine.ccsm.spool import surface_of
+    from engine.store.spool import DiskSpool
+
+    surfaces = random_lines(20)
+    spool = DiskSpool(tmp_path)
+    spool.put_many(enumerate(surfaces))
+    reads: list[int] = []
+    read = spool.get_payloads
+    spool.get_payloads = lambda indices: reads.extend(indices) or read(indices)  # type: ignore[method-assign]
+    cache = NearCache(spool)
+    cache.payloads(list(range(20)))
+    cache.surface(3)
+    moved = replace_rows(surfaces[3], surfaces[3].base + 100.0)
+    spool.put(3, moved)
+    cache.forget([3])
+    reads.clear()
+    assert_array_equal(surface_of(cache.payloads([2, 3])[1]).base, moved.base)
+    assert_array_equal(cache.surface(3).base, moved.base)
+    assert reads == [3]
+    cache.forget(range(20))
+    assert cache.size == 0 and not cache.items
+    spool.close()
+
+
+def replace_rows(surface: CCS, base: np.ndarray) -> CCS:
+    """The surface with other base and top rows (as a rebuild gives)."""
+    from dataclasses import replace
+
+    return replace(surface, base=base, top=base + 1.0)
+
+
+def test_repair_with_the_near_cache_kept_across_checks_makes_the_surfaces_of_one_that_keeps_nothing(
+    clusters: ContourSet, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The repair's cache of surfaces outlives its checks: its re-checks must see the rebuilt surfaces, so the
+    build is the one with nothing kept between blocks (a stale surface would be found crossing again)."""
+    monkeypatch.setattr(blocks, "BLOCK_CONTOURS", 4)
+    kept = build_contour_set(clusters, BuildParams(), workers=1)
+    monkeypatch.setattr(blocks, "NEAR_CACHE_BYTES", 0)
+    fresh = build_contour_set(clusters, BuildParams(), workers=1)
+    assert fresh.repaired > 10
+    assert kept.repaired == fresh.repaired
+    for a, b in zip(kept.surfaces, fresh.surfaces, strict=True):
+        assert_array_equal(a.base, b.base)
+        assert_array_equal(a.top, b.top)
