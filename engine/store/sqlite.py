@@ -839,11 +839,15 @@ class CCSStore:
         columns = ", ".join(f"p.{c}" for c in names)
         rows = self._con().execute(
             f"SELECT p.fid, p.k, {columns} FROM {kind}_piece_rtree r JOIN {kind}_pieces p ON p.piece = r.piece "
-            "WHERE r.maxx >= ? AND r.minx <= ? AND r.maxy >= ? AND r.miny <= ? AND r.dataset = ? ORDER BY p.fid, p.k",
+            "WHERE r.maxx >= ? AND r.minx <= ? AND r.maxy >= ? AND r.miny <= ? AND r.dataset = ?",
             (minx, maxx, miny, maxy, dataset),
         ).fetchall()
+        # Sorted here, not by SQL's ORDER BY, whose sorter copies every row with its blobs.
         fid = np.array([r[0] for r in rows], dtype=np.int64)
         k = np.array([r[1] for r in rows], dtype=np.int64)
+        order = np.lexsort((k, fid))
+        rows = [rows[i] for i in order.tolist()]
+        fid, k = fid[order], k[order]
         n = np.array([len(r[2]) // 16 for r in rows], dtype=np.int64)  # the first column holds (x, y) float64
         arrays = tuple(_column(name, b"".join([r[2 + j] for r in rows])) for j, name in enumerate(names))
         return StoredPieces(fid, k, n, arrays)
