@@ -150,9 +150,14 @@ def pack_of_pieces(
 
     A contour whose box meets ``box`` while none of its pieces does would draw nothing in the tile, so the
     pieces' own R*Tree is the only one a tile of stored pieces asks. The contours' heads come from ``heads``
-    (the dataset's, held in memory) when given, else from the store.
+    (the dataset's, held in memory) when given, else from the store; so do the bounds of the dataset's fids, by
+    which its pieces are told apart from other datasets' when they are one run of fids.
     """
-    read = {each: store.pieces_meeting(dataset, box, each) if each == kind else _nowhere(each) for each in PIECE_KINDS}
+    fid_range = None if heads is None else heads.fid_range
+    read = {
+        each: store.pieces_meeting(dataset, box, each, fid_range) if each == kind else _nowhere(each)
+        for each in PIECE_KINDS
+    }
     fids = store.query(dataset, box) if kind is None else np.unique(read[kind].fid).tolist()
     if not fids:
         return None

@@ -831,16 +831,24 @@ class CCSStore:
         )
         return list(chain.from_iterable(cur))
 
-    def pieces_meeting(self, dataset: str, bounds_3857: Sequence[float], kind: str) -> StoredPieces:
+    def pieces_meeting(
+        self, dataset: str, bounds_3857: Sequence[float], kind: str, fid_range: tuple[int, int] | None = None
+    ) -> StoredPieces:
         """The dataset's pieces of one kind (``ccs`` or ``original``) whose rows' extent meets an EPSG:3857
-        rectangle, sorted by fid and k."""
+        rectangle, sorted by fid and k.
+
+        ``fid_range`` (first, last): the dataset's contours are exactly the fids first to last, so its pieces
+        are told apart by their fid instead of the R*Tree's dataset column, which costs a look-up of every
+        candidate in the R*Tree's own row table (a quarter of the query at 64× the sample).
+        """
         minx, miny, maxx, maxy = (float(v) for v in bounds_3857)
         names = PIECE_KINDS[kind]
         columns = ", ".join(f"p.{c}" for c in names)
+        ours, mine = ("p.fid BETWEEN ? AND ?", fid_range) if fid_range is not None else ("r.dataset = ?", (dataset,))
         rows = self._con().execute(
             f"SELECT p.fid, p.k, {columns} FROM {kind}_piece_rtree r JOIN {kind}_pieces p ON p.piece = r.piece "
-            "WHERE r.maxx >= ? AND r.minx <= ? AND r.maxy >= ? AND r.miny <= ? AND r.dataset = ?",
-            (minx, maxx, miny, maxy, dataset),
+            f"WHERE r.maxx >= ? AND r.minx <= ? AND r.maxy >= ? AND r.miny <= ? AND {ours}",
+            (minx, maxx, miny, maxy, *mine),
         ).fetchall()
         # Sorted here, not by SQL's ORDER BY, whose sorter copies every row with its blobs.
         fid = np.array([r[0] for r in rows], dtype=np.int64)
