@@ -346,6 +346,20 @@ def _array(b: bytes, cols: int = 0) -> NDArray[np.float64]:
     return a.reshape(-1, cols) if cols else a
 
 
+def pieces_sql(kind: str, by_fid: bool) -> str:
+    """The query of :meth:`CCSStore.pieces_meeting`: pieces of ``kind`` whose box meets (minx, maxx, miny, maxy),
+    of one dataset (its id; ``by_fid``: its first and last fid).
+
+    The R*Tree is searched first: ``+p.fid`` keeps SQLite from walking the pieces' fid index over the whole
+    dataset instead (a hundred times slower at 64× the sample)."""
+    columns = ", ".join(f"p.{c}" for c in PIECE_KINDS[kind])
+    ours = "+p.fid BETWEEN ? AND ?" if by_fid else "r.dataset = ?"
+    return (
+        f"SELECT p.fid, p.k, {columns} FROM {kind}_piece_rtree r JOIN {kind}_pieces p ON p.piece = r.piece "
+        f"WHERE r.maxx >= ? AND r.minx <= ? AND r.maxy >= ? AND r.miny <= ? AND {ours}"
+    )
+
+
 def _column(name: str, blob: bytes) -> NDArray[Any]:
     """A stored piece's column: float32 significance, else (n, 2) float64 rows."""
     return np.frombuffer(blob, dtype="<f4") if name.startswith("sig") else _array(blob, 2)
@@ -843,13 +857,8 @@ class CCSStore:
         """
         minx, miny, maxx, maxy = (float(v) for v in bounds_3857)
         names = PIECE_KINDS[kind]
-        columns = ", ".join(f"p.{c}" for c in names)
-        ours, mine = ("p.fid BETWEEN ? AND ?", fid_range) if fid_range is not None else ("r.dataset = ?", (dataset,))
-        rows = self._con().execute(
-            f"SELECT p.fid, p.k, {columns} FROM {kind}_piece_rtree r JOIN {kind}_pieces p ON p.piece = r.piece "
-            f"WHERE r.maxx >= ? AND r.minx <= ? AND r.maxy >= ? AND r.miny <= ? AND {ours}",
-            (minx, maxx, miny, maxy, *mine),
-        ).fetchall()
+        mine = fid_range if fid_range is not None else (dataset,)
+        rows = self._con().execute(pieces_sql(kind, fid_range is not None), (minx, maxx, miny, maxy, *mine)).fetchall()
         # Sorted here, not by SQL's ORDER BY, whose sorter copies every row with its blobs.
         fid = np.array([r[0] for r in rows], dtype=np.int64)
         k = np.array([r[1] for r in rows], dtype=np.int64)

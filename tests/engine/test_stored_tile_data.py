@@ -18,7 +18,7 @@ from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.heads import DatasetHeads
 from engine.serve.pack import HeadColumns
 from engine.serve.renderer import Renderer
-from engine.store.sqlite import STORE_FORMAT, CCSStore
+from engine.store.sqlite import STORE_FORMAT, CCSStore, pieces_sql
 from engine.tiles.grid import Tile, buffered, tile_bounds, tiles_covering
 from engine.tiles.significance import row_significance
 from engine.types import Bounds
@@ -228,3 +228,14 @@ def test_the_fids_of_a_dataset_with_a_gap_are_no_range() -> None:
     assert heads([4, 5, 6]).fid_range == (4, 6)
     assert heads([4, 6, 7]).fid_range is None
     assert heads([]).fid_range is None
+
+
+@pytest.mark.parametrize("by_fid", [True, False])
+@pytest.mark.parametrize("kind", ["ccs", "original"])
+def test_the_pieces_query_searches_the_rtree_first(sample_store: Path, kind: str, by_fid: bool) -> None:
+    """Walking the pieces' fid index first reads every piece of the dataset: 200 ms a tile at 64× the sample."""
+    con = sqlite3.connect(f"file:{sample_store}?mode=ro", uri=True)
+    plan = con.execute(f"EXPLAIN QUERY PLAN {pieces_sql(kind, by_fid)}", (0.0, 1.0, 0.0, 1.0, 1, 2)[: 6 - (not by_fid)])
+    steps = [row[3] for row in plan.fetchall()]
+    con.close()
+    assert steps[0].startswith("SCAN r VIRTUAL TABLE") and "PRIMARY KEY" in steps[1], steps
