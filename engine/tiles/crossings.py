@@ -61,29 +61,51 @@ def _cells_of_segment(px, py, qx, qy, lo, size, cell, cells):  # pragma: no cove
 
 
 @njit(cache=True)
-def _crossing_kernel(pts, seg_start, seg_owner, lo, size, cell, first_only, found):  # noqa: C901  # pragma: no cover - compiled
-    n_seg = len(seg_start)
+def _segments_in_cells(pts, part_len, part_owner, lo, size, cell):  # pragma: no cover - compiled
+    """Every segment (each point but the last of each part: segment s runs from point seg_start[s] to the next)
+    with its owner, and the segments of each cell: ``members[offsets[g]:offsets[g + 1]]``. Each segment's cells
+    are walked once, kept, then counted into place."""
+    n_seg = 0
+    for p in range(len(part_len)):
+        n_seg += part_len[p] - 1
+    seg_start = np.empty(n_seg, dtype=np.int64)
+    seg_owner = np.empty(n_seg, dtype=np.int64)
+    bound = 0
+    s = 0
+    i = 0
+    for p in range(len(part_len)):
+        for j in range(i, i + part_len[p] - 1):
+            seg_start[s] = j
+            seg_owner[s] = part_owner[p]
+            span = abs(pts[j + 1, 0] - pts[j, 0]) + abs(pts[j + 1, 1] - pts[j, 1])
+            bound += 2 * (span // cell + 4) + 4  # room for any segment's cells, as _cells_of_segment walks them
+            s += 1
+        i += part_len[p]
+    walked = np.empty(bound, dtype=np.int64)
+    seg_cells = np.empty(n_seg + 1, dtype=np.int64)
     counts = np.zeros(size * size + 1, dtype=np.int64)
-    longest = 0
+    w = 0
     for s in range(n_seg):
-        i = seg_start[s]
-        span = abs(pts[i + 1, 0] - pts[i, 0]) + abs(pts[i + 1, 1] - pts[i, 1])
-        longest = max(longest, span // cell + 4)
-    cells = np.empty(2 * longest + 4, dtype=np.int64)
-    for s in range(n_seg):
-        i = seg_start[s]
-        k = _cells_of_segment(pts[i, 0], pts[i, 1], pts[i + 1, 0], pts[i + 1, 1], lo, size, cell, cells)
-        for c in range(k):
-            counts[cells[c] + 1] += 1
+        j = seg_start[s]
+        seg_cells[s] = w
+        k = _cells_of_segment(pts[j, 0], pts[j, 1], pts[j + 1, 0], pts[j + 1, 1], lo, size, cell, walked[w:])
+        for c in range(w, w + k):
+            counts[walked[c] + 1] += 1
+        w += k
+    seg_cells[n_seg] = w
     offsets = np.cumsum(counts)
     fill = offsets.copy()
-    members = np.empty(offsets[-1], dtype=np.int64)
+    members = np.empty(w, dtype=np.int64)
     for s in range(n_seg):
-        i = seg_start[s]
-        k = _cells_of_segment(pts[i, 0], pts[i, 1], pts[i + 1, 0], pts[i + 1, 1], lo, size, cell, cells)
-        for c in range(k):
-            members[fill[cells[c]]] = s
-            fill[cells[c]] += 1
+        for c in range(seg_cells[s], seg_cells[s + 1]):
+            members[fill[walked[c]]] = s
+            fill[walked[c]] += 1
+    return seg_start, seg_owner, offsets, members
+
+
+@njit(cache=True)
+def _crossing_kernel(pts, part_len, part_owner, lo, size, cell, first_only, found):  # pragma: no cover - compiled
+    seg_start, seg_owner, offsets, members = _segments_in_cells(pts, part_len, part_owner, lo, size, cell)
     n_found = 0
     for g in range(size * size):
         for u in range(offsets[g], offsets[g + 1]):
@@ -111,21 +133,15 @@ def _crossing_kernel(pts, seg_start, seg_owner, lo, size, cell, first_only, foun
 def _segments(
     pts: NDArray[np.int64], part_len: NDArray[np.int64], part_owner: NDArray[np.int64]
 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], int, int, int]:
-    """Points, first point of each segment, owner of each segment, and the coarse grid (origin, cells a side,
-    units a cell)."""
+    """Points, length and owner of each part, and the coarse grid (origin, cells a side, units a cell)."""
     pts = np.ascontiguousarray(pts, dtype=np.int64)
-    lens = np.asarray(part_len, dtype=np.int64)
-    starts = np.cumsum(lens) - lens
-    # Segment s runs from point seg_start[s] to seg_start[s] + 1: every point but the last of each part.
-    first = np.repeat(starts, lens - 1)
-    seg_start = first + (np.arange(len(first)) - np.repeat(np.cumsum(lens - 1) - (lens - 1), lens - 1))
-    seg_owner = np.repeat(np.asarray(part_owner, dtype=np.int64), lens - 1)
+    lens = np.ascontiguousarray(part_len, dtype=np.int64)
     lo = int(pts.min()) - 1
     span = int(pts.max()) - lo
     # About one cell per segment: the grid's cost follows the drawing, not the tile's area.
-    cell = max(MIN_CELL_UNITS, int(span / np.sqrt(max(len(seg_start), 1))))
+    cell = max(MIN_CELL_UNITS, int(span / np.sqrt(max(len(pts) - len(lens), 1))))
     size = span // cell + 2
-    return pts, seg_start.astype(np.int64), seg_owner, lo, size, cell
+    return pts, lens, np.ascontiguousarray(part_owner, dtype=np.int64), lo, size, cell
 
 
 def lines_cross_in_grid(pts: NDArray[np.int64], part_len: NDArray[np.int64], part_owner: NDArray[np.int64]) -> bool:
