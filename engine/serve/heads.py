@@ -43,6 +43,15 @@ class DatasetHeads:
         fid, elevation, vanish, tables = store.dataset_heads(dataset)
         return cls(data_version, HeadColumns(fid, elevation, vanish, tables))
 
+    @property
+    def fid_range(self) -> tuple[int, int] | None:
+        """(first, last) when the dataset's fids are every fid from first to last (a dataset is saved in one
+        transaction, its fids counted up one by one), else None."""
+        fid = self.heads.fid
+        if len(fid) == 0 or int(fid[-1]) - int(fid[0]) + 1 != len(fid):
+            return None
+        return int(fid[0]), int(fid[-1])
+
     def of(self, store: CCSStore, fids: Sequence[int]) -> HeadColumns:
         """The heads of ``fids`` (sorted): from memory, or from the store when one is not held (the store
         changed since these were read; the renderer reads the new version's on its next tile)."""

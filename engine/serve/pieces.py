@@ -18,12 +18,13 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from engine.serve.heads import DatasetHeads, read_heads
 from engine.serve.pack import DatasetPack, LineSet
 from engine.store.sqlite import PIECE_KINDS, PIECE_ROWS, CCSStore, StoredPieces
-from engine.tiles.runs import CHUNK_ROWS, ranges
+from engine.tiles.runs import CHUNK_ROWS
 from engine.types import Bounds
 
 assert PIECE_ROWS % CHUNK_ROWS == 0, "a stored piece must hold whole chunks of the tiles' spatial index"
@@ -35,45 +36,96 @@ FILLER_ROWS = CHUNK_ROWS - 1
 STAND_IN_ROWS = 2
 
 
-def _with_filler(column: NDArray[Any]) -> NDArray[Any]:
-    """A column followed by FILLER_ROWS rows that meet no box: NaN coordinates (any comparison with NaN is
-    false), zero significance."""
-    shape = (FILLER_ROWS, *column.shape[1:])
-    filler = np.full(shape, np.nan) if column.ndim == 2 else np.zeros(shape, column.dtype)
-    return np.concatenate([column, filler])
-
-
 def joined(pieces: StoredPieces, fids: NDArray[np.int64]) -> tuple[tuple[NDArray[Any], ...], NDArray[np.int64]]:
     """Each contour's pieces joined into one line, the lines in the order of ``fids`` (sorted): every column's
     rows, and the rows of each line.
 
     Consecutive pieces share a row, kept once; after a piece followed by a gap, filler rows bring the next piece
-    onto a chunk boundary; a contour of ``fids`` without pieces gets a stand-in line of filler.
+    onto a chunk boundary; a contour of ``fids`` without pieces gets a stand-in line of filler. Filler is NaN
+    coordinates (any comparison with NaN is false, so its box meets nothing) and zero significance.
     """
-    mine = np.isin(pieces.fid, fids)
-    fid, k, n = pieces.fid[mine], pieces.k[mine], pieces.n[mine]
-    start = (np.cumsum(pieces.n) - pieces.n)[mine]
-    filler_at = int(pieces.n.sum())  # the first filler row, after every stored row
-    same_next = np.zeros(len(fid), dtype=bool)
-    same_next[:-1] = fid[1:] == fid[:-1]
-    follows = np.zeros(len(fid), dtype=bool)
-    follows[:-1] = k[1:] == k[:-1] + 1
-    keep = n - (same_next & follows)
-    filler = np.where(same_next & ~follows, FILLER_ROWS, 0)
-    missing = fids[~np.isin(fids, fid)]
-    # Each entry (a piece or a stand-in) is two ranges of rows: its own rows, then filler rows.
-    entry_fid = np.concatenate([fid, missing])
-    a = np.concatenate([start, np.full(len(missing), filler_at)])
-    b = a + np.concatenate([keep, np.full(len(missing), STAND_IN_ROWS)])
-    fill = np.concatenate([filler, np.zeros(len(missing), np.int64)])
-    order = np.argsort(entry_fid, kind="stable")
-    a, b, fill = a[order], b[order], fill[order]
-    starts = np.column_stack([a, np.full(len(a), filler_at)]).ravel()
-    ends = np.column_stack([b, filler_at + fill]).ravel()
-    take = ranges(starts, ends)
-    sizes = np.bincount(np.searchsorted(fids, entry_fid[order]), weights=b - a + fill, minlength=len(fids))
-    columns = tuple(_with_filler(c)[take] for c in pieces.columns)
-    return columns, sizes.astype(np.int64)
+    fids = np.asarray(fids, dtype=np.int64)
+    start = np.cumsum(pieces.n) - pieces.n
+    sizes = np.zeros(len(fids), dtype=np.int64)
+    _line_sizes(pieces.fid, pieces.k, pieces.n, fids, sizes)
+    take = np.empty(int(sizes.sum()), dtype=np.int64)
+    _rows_taken(pieces.fid, pieces.k, pieces.n, start, fids, take)
+    columns = tuple(_gathered(c, take) for c in pieces.columns)
+    return columns, sizes
+
+
+def _gathered(column: NDArray[Any], take: NDArray[np.int64]) -> NDArray[Any]:
+    """Rows ``take`` of a column, -1 standing for a filler row."""
+    out = np.empty((len(take), *column.shape[1:]), dtype=column.dtype)
+    if column.ndim == 2:
+        _gather_rows(column, take, out)
+    else:
+        _gather_values(column, take, out)
+    return out
+
+
+@njit(cache=True)
+def _line_sizes(fid, k, n, fids, sizes):  # pragma: no cover - compiled
+    """Rows of each joined line (pieces sorted by fid and k; ``fids`` sorted; pieces of other fids skipped)."""
+    i = 0
+    for j in range(len(fids)):
+        while i < len(fid) and fid[i] < fids[j]:
+            i += 1
+        if i == len(fid) or fid[i] != fids[j]:
+            sizes[j] = STAND_IN_ROWS
+            continue
+        while i < len(fid) and fid[i] == fids[j]:
+            if i + 1 < len(fid) and fid[i + 1] == fid[i]:
+                sizes[j] += n[i] - 1 if k[i + 1] == k[i] + 1 else n[i] + FILLER_ROWS
+            else:
+                sizes[j] += n[i]
+            i += 1
+
+
+@njit(cache=True)
+def _rows_taken(fid, k, n, start, fids, take):  # pragma: no cover - compiled
+    """The stored row behind each row of the joined lines (-1: filler), as :func:`_line_sizes` counts them."""
+    i = 0
+    w = 0
+    for j in range(len(fids)):
+        while i < len(fid) and fid[i] < fids[j]:
+            i += 1
+        if i == len(fid) or fid[i] != fids[j]:
+            for _ in range(STAND_IN_ROWS):
+                take[w] = -1
+                w += 1
+            continue
+        while i < len(fid) and fid[i] == fids[j]:
+            keep, fill = n[i], 0
+            if i + 1 < len(fid) and fid[i + 1] == fid[i]:
+                if k[i + 1] == k[i] + 1:
+                    keep -= 1  # the next piece starts with this one's last row
+                else:
+                    fill = FILLER_ROWS
+            for r in range(keep):
+                take[w] = start[i] + r
+                w += 1
+            for _ in range(fill):
+                take[w] = -1
+                w += 1
+            i += 1
+
+
+@njit(cache=True)
+def _gather_rows(column, take, out):  # pragma: no cover - compiled
+    for w in range(len(take)):
+        if take[w] < 0:
+            out[w, 0] = np.nan
+            out[w, 1] = np.nan
+        else:
+            out[w, 0] = column[take[w], 0]
+            out[w, 1] = column[take[w], 1]
+
+
+@njit(cache=True)
+def _gather_values(column, take, out):  # pragma: no cover - compiled
+    for w in range(len(take)):
+        out[w] = 0 if take[w] < 0 else column[take[w]]
 
 
 def _nowhere(kind: str) -> StoredPieces:
@@ -98,9 +150,14 @@ def pack_of_pieces(
 
     A contour whose box meets ``box`` while none of its pieces does would draw nothing in the tile, so the
     pieces' own R*Tree is the only one a tile of stored pieces asks. The contours' heads come from ``heads``
-    (the dataset's, held in memory) when given, else from the store.
+    (the dataset's, held in memory) when given, else from the store; so do the bounds of the dataset's fids, by
+    which its pieces are told apart from other datasets' when they are one run of fids.
     """
-    read = {each: store.pieces_meeting(dataset, box, each) if each == kind else _nowhere(each) for each in PIECE_KINDS}
+    fid_range = None if heads is None else heads.fid_range
+    read = {
+        each: store.pieces_meeting(dataset, box, each, fid_range) if each == kind else _nowhere(each)
+        for each in PIECE_KINDS
+    }
     fids = store.query(dataset, box) if kind is None else np.unique(read[kind].fid).tolist()
     if not fids:
         return None

@@ -346,6 +346,20 @@ def _array(b: bytes, cols: int = 0) -> NDArray[np.float64]:
     return a.reshape(-1, cols) if cols else a
 
 
+def pieces_sql(kind: str, by_fid: bool) -> str:
+    """The query of :meth:`CCSStore.pieces_meeting`: pieces of ``kind`` whose box meets (minx, maxx, miny, maxy),
+    of one dataset (its id; ``by_fid``: its first and last fid).
+
+    The R*Tree is searched first: ``+p.fid`` keeps SQLite from walking the pieces' fid index over the whole
+    dataset instead (a hundred times slower at 64× the sample)."""
+    columns = ", ".join(f"p.{c}" for c in PIECE_KINDS[kind])
+    ours = "+p.fid BETWEEN ? AND ?" if by_fid else "r.dataset = ?"
+    return (
+        f"SELECT p.fid, p.k, {columns} FROM {kind}_piece_rtree r JOIN {kind}_pieces p ON p.piece = r.piece "
+        f"WHERE r.maxx >= ? AND r.minx <= ? AND r.maxy >= ? AND r.miny <= ? AND {ours}"
+    )
+
+
 def _column(name: str, blob: bytes) -> NDArray[Any]:
     """A stored piece's column: float32 significance, else (n, 2) float64 rows."""
     return np.frombuffer(blob, dtype="<f4") if name.startswith("sig") else _array(blob, 2)
@@ -831,19 +845,26 @@ class CCSStore:
         )
         return list(chain.from_iterable(cur))
 
-    def pieces_meeting(self, dataset: str, bounds_3857: Sequence[float], kind: str) -> StoredPieces:
+    def pieces_meeting(
+        self, dataset: str, bounds_3857: Sequence[float], kind: str, fid_range: tuple[int, int] | None = None
+    ) -> StoredPieces:
         """The dataset's pieces of one kind (``ccs`` or ``original``) whose rows' extent meets an EPSG:3857
-        rectangle, sorted by fid and k."""
+        rectangle, sorted by fid and k.
+
+        ``fid_range`` (first, last): the dataset's contours are exactly the fids first to last, so its pieces
+        are told apart by their fid instead of the R*Tree's dataset column, which costs a look-up of every
+        candidate in the R*Tree's own row table (a quarter of the query at 64× the sample).
+        """
         minx, miny, maxx, maxy = (float(v) for v in bounds_3857)
         names = PIECE_KINDS[kind]
-        columns = ", ".join(f"p.{c}" for c in names)
-        rows = self._con().execute(
-            f"SELECT p.fid, p.k, {columns} FROM {kind}_piece_rtree r JOIN {kind}_pieces p ON p.piece = r.piece "
-            "WHERE r.maxx >= ? AND r.minx <= ? AND r.maxy >= ? AND r.miny <= ? AND r.dataset = ? ORDER BY p.fid, p.k",
-            (minx, maxx, miny, maxy, dataset),
-        ).fetchall()
+        mine = fid_range if fid_range is not None else (dataset,)
+        rows = self._con().execute(pieces_sql(kind, fid_range is not None), (minx, maxx, miny, maxy, *mine)).fetchall()
+        # Sorted here, not by SQL's ORDER BY, whose sorter copies every row with its blobs.
         fid = np.array([r[0] for r in rows], dtype=np.int64)
         k = np.array([r[1] for r in rows], dtype=np.int64)
+        order = np.lexsort((k, fid))
+        rows = [rows[i] for i in order.tolist()]
+        fid, k = fid[order], k[order]
         n = np.array([len(r[2]) // 16 for r in rows], dtype=np.int64)  # the first column holds (x, y) float64
         arrays = tuple(_column(name, b"".join([r[2 + j] for r in rows])) for j, name in enumerate(names))
         return StoredPieces(fid, k, n, arrays)

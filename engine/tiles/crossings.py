@@ -4,7 +4,9 @@ A proper crossing is two segments meeting at a point inside both (touching, shar
 runs are not; ``engine.ccsm.topology.lines_cross_properly`` is the same predicate on floats). The renderer asks
 this of every tile after plain rounding and snap-rounds only the tiles where the answer is yes
 (docs/design.md section 4.8). Segments are put into the cells of a coarse grid they pass through, and only
-segments sharing a cell are compared, with exact integer orientation tests.
+segments sharing a cell are compared, with exact integer orientation tests. The grid has about as many cells as
+the drawing has segments (cells of at least :data:`MIN_CELL_UNITS`): a fixed fine grid over the whole buffered
+tile cost more to clear and walk than the comparisons it saved.
 """
 
 from __future__ import annotations
@@ -13,8 +15,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-#: Grid units per side of a cell of the coarse grid: a few segments per cell on the densest tiles.
-CELL_UNITS = 8
+#: Fewest grid units per side of a cell of the coarse grid: a few segments per cell on the densest tiles.
+MIN_CELL_UNITS = 8
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -25,10 +27,11 @@ def orientation_sign(ax, ay, bx, by, cx, cy):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _cells_of_segment(px, py, qx, qy, lo, size, cells):  # pragma: no cover - compiled
-    """The coarse cells (row-major indices) the segment p -> q passes through; returns how many."""
-    ux, uy = (px - lo) / CELL_UNITS, (py - lo) / CELL_UNITS
-    vx, vy = (qx - lo) / CELL_UNITS, (qy - lo) / CELL_UNITS
+def _cells_of_segment(px, py, qx, qy, lo, size, cell, cells):  # pragma: no cover - compiled
+    """The coarse cells (row-major indices, ``cell`` units a side) the segment p -> q passes through; returns
+    how many."""
+    ux, uy = (px - lo) / cell, (py - lo) / cell
+    vx, vy = (qx - lo) / cell, (qy - lo) / cell
     cx, cy = np.int64(np.floor(ux)), np.int64(np.floor(uy))
     ex, ey = np.int64(np.floor(vx)), np.int64(np.floor(vy))
     dx, dy = vx - ux, vy - uy
@@ -58,34 +61,56 @@ def _cells_of_segment(px, py, qx, qy, lo, size, cells):  # pragma: no cover - co
 
 
 @njit(cache=True)
-def _crossing_kernel(pts, seg_start, seg_owner, lo, size, first_only, found):  # noqa: C901  # pragma: no cover - compiled
-    n_seg = len(seg_start)
+def _segments_in_cells(pts, part_len, part_owner, lo, size, cell):  # pragma: no cover - compiled
+    """Every segment (each point but the last of each part: segment s runs from point seg_start[s] to the next)
+    with its owner, and the segments of each cell: ``members[offsets[g]:offsets[g + 1]]``. Each segment's cells
+    are walked once, kept, then counted into place."""
+    n_seg = 0
+    for p in range(len(part_len)):
+        n_seg += part_len[p] - 1
+    seg_start = np.empty(n_seg, dtype=np.int64)
+    seg_owner = np.empty(n_seg, dtype=np.int64)
+    bound = 0
+    s = 0
+    i = 0
+    for p in range(len(part_len)):
+        for j in range(i, i + part_len[p] - 1):
+            seg_start[s] = j
+            seg_owner[s] = part_owner[p]
+            span = abs(pts[j + 1, 0] - pts[j, 0]) + abs(pts[j + 1, 1] - pts[j, 1])
+            bound += 2 * (span // cell + 4) + 4  # room for any segment's cells, as _cells_of_segment walks them
+            s += 1
+        i += part_len[p]
+    walked = np.empty(bound, dtype=np.int64)
+    seg_cells = np.empty(n_seg + 1, dtype=np.int64)
     counts = np.zeros(size * size + 1, dtype=np.int64)
-    longest = 0
+    w = 0
     for s in range(n_seg):
-        i = seg_start[s]
-        span = abs(pts[i + 1, 0] - pts[i, 0]) + abs(pts[i + 1, 1] - pts[i, 1])
-        longest = max(longest, span // CELL_UNITS + 4)
-    cells = np.empty(2 * longest + 4, dtype=np.int64)
-    for s in range(n_seg):
-        i = seg_start[s]
-        k = _cells_of_segment(pts[i, 0], pts[i, 1], pts[i + 1, 0], pts[i + 1, 1], lo, size, cells)
-        for c in range(k):
-            counts[cells[c] + 1] += 1
+        j = seg_start[s]
+        seg_cells[s] = w
+        k = _cells_of_segment(pts[j, 0], pts[j, 1], pts[j + 1, 0], pts[j + 1, 1], lo, size, cell, walked[w:])
+        for c in range(w, w + k):
+            counts[walked[c] + 1] += 1
+        w += k
+    seg_cells[n_seg] = w
     offsets = np.cumsum(counts)
     fill = offsets.copy()
-    members = np.empty(offsets[-1], dtype=np.int64)
+    members = np.empty(w, dtype=np.int64)
     for s in range(n_seg):
-        i = seg_start[s]
-        k = _cells_of_segment(pts[i, 0], pts[i, 1], pts[i + 1, 0], pts[i + 1, 1], lo, size, cells)
-        for c in range(k):
-            members[fill[cells[c]]] = s
-            fill[cells[c]] += 1
+        for c in range(seg_cells[s], seg_cells[s + 1]):
+            members[fill[walked[c]]] = s
+            fill[walked[c]] += 1
+    return seg_start, seg_owner, offsets, members
+
+
+@njit(cache=True)
+def _crossing_kernel(pts, part_len, part_owner, lo, size, cell, first_only, found):  # pragma: no cover - compiled
+    seg_start, seg_owner, offsets, members = _segments_in_cells(pts, part_len, part_owner, lo, size, cell)
     n_found = 0
-    for cell in range(size * size):
-        for u in range(offsets[cell], offsets[cell + 1]):
+    for g in range(size * size):
+        for u in range(offsets[g], offsets[g + 1]):
             a = seg_start[members[u]]
-            for v in range(u + 1, offsets[cell + 1]):
+            for v in range(u + 1, offsets[g + 1]):
                 if seg_owner[members[u]] == seg_owner[members[v]]:
                     continue
                 b = seg_start[members[v]]
@@ -107,18 +132,16 @@ def _crossing_kernel(pts, seg_start, seg_owner, lo, size, first_only, found):  #
 
 def _segments(
     pts: NDArray[np.int64], part_len: NDArray[np.int64], part_owner: NDArray[np.int64]
-) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], int, int]:
-    """Points, first point of each segment, owner of each segment, and the coarse grid (origin, side)."""
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], int, int, int]:
+    """Points, length and owner of each part, and the coarse grid (origin, cells a side, units a cell)."""
     pts = np.ascontiguousarray(pts, dtype=np.int64)
-    lens = np.asarray(part_len, dtype=np.int64)
-    starts = np.cumsum(lens) - lens
-    # Segment s runs from point seg_start[s] to seg_start[s] + 1: every point but the last of each part.
-    first = np.repeat(starts, lens - 1)
-    seg_start = first + (np.arange(len(first)) - np.repeat(np.cumsum(lens - 1) - (lens - 1), lens - 1))
-    seg_owner = np.repeat(np.asarray(part_owner, dtype=np.int64), lens - 1)
+    lens = np.ascontiguousarray(part_len, dtype=np.int64)
     lo = int(pts.min()) - 1
-    size = int((int(pts.max()) - lo) // CELL_UNITS + 2)
-    return pts, seg_start.astype(np.int64), seg_owner, lo, size
+    span = int(pts.max()) - lo
+    # About one cell per segment: the grid's cost follows the drawing, not the tile's area.
+    cell = max(MIN_CELL_UNITS, int(span / np.sqrt(max(len(pts) - len(lens), 1))))
+    size = span // cell + 2
+    return pts, lens, np.ascontiguousarray(part_owner, dtype=np.int64), lo, size, cell
 
 
 def lines_cross_in_grid(pts: NDArray[np.int64], part_len: NDArray[np.int64], part_owner: NDArray[np.int64]) -> bool:

@@ -38,23 +38,46 @@ def chunk_bounds(rows: Sequence[NDArray[np.float64]], size: int = CHUNK_ROWS) ->
 def chunk_bounds_packed(
     rows: Sequence[NDArray[np.float64]], off: NDArray[np.int64], size: int = CHUNK_ROWS
 ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """:func:`chunk_bounds` of many lines concatenated (line i is rows [off[i], off[i + 1])) in one pass.
+    """:func:`chunk_bounds` of many lines concatenated (line i is rows [off[i], off[i + 1])) in one compiled pass
+    over one or two (M, 2) arrays (a NaN row makes its chunk's box NaN, as ``np.minimum`` does: it meets nothing).
 
     Returns the (C, 4) boxes of all lines' chunks, line by line, and the (n + 1,) chunk offsets per line.
     """
+    off = np.asarray(off, dtype=np.int64)
     m = np.diff(off)
     counts = (np.maximum(m - 1, 1) + size - 1) // size
     chunk_off = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    line = np.repeat(np.arange(len(m)), counts)
-    local = np.arange(int(chunk_off[-1]), dtype=np.int64) - chunk_off[line]
-    starts = off[line] + local * size
-    nxt = np.minimum(starts + size, off[line + 1] - 1)
-    lo = np.full((len(starts), 2), np.inf)
-    hi = np.full((len(starts), 2), -np.inf)
-    for r in rows:
-        lo = np.minimum(lo, np.minimum(np.minimum.reduceat(r, starts, axis=0), r[nxt]))
-        hi = np.maximum(hi, np.maximum(np.maximum.reduceat(r, starts, axis=0), r[nxt]))
-    return np.column_stack([lo, hi]), chunk_off
+    base = np.ascontiguousarray(rows[0], dtype=np.float64)
+    top = np.ascontiguousarray(rows[-1], dtype=np.float64)
+    boxes = np.empty((int(chunk_off[-1]), 4))
+    _chunk_boxes_kernel(base, top, len(rows) > 1, off, chunk_off, size, boxes)
+    return boxes, chunk_off
+
+
+@njit(cache=True)
+def _chunk_boxes_kernel(base, top, both, off, chunk_off, size, boxes):  # pragma: no cover - compiled
+    """Chunk c of line i covers rows ``off[i] + j * size`` to ``size`` rows on, both included (j its place in
+    the line), cut at the line's last row. A NaN coordinate makes that axis of its chunk's box NaN, as
+    ``np.minimum`` / ``np.maximum`` do."""
+    for i in range(len(off) - 1):
+        for c in range(chunk_off[i], chunk_off[i + 1]):
+            first = off[i] + (c - chunk_off[i]) * size
+            last = min(first + size, off[i + 1] - 1)
+            lox, loy, hix, hiy = np.inf, np.inf, -np.inf, -np.inf
+            nan_x, nan_y = False, False
+            for r in range(first, last + 1):
+                x, y = base[r, 0], base[r, 1]
+                lox, hix, loy, hiy = min(lox, x), max(hix, x), min(loy, y), max(hiy, y)
+                nan_x, nan_y = nan_x | (x != x), nan_y | (y != y)
+                if both:
+                    x, y = top[r, 0], top[r, 1]
+                    lox, hix, loy, hiy = min(lox, x), max(hix, x), min(loy, y), max(hiy, y)
+                    nan_x, nan_y = nan_x | (x != x), nan_y | (y != y)
+            if nan_x:
+                lox = hix = np.nan
+            if nan_y:
+                loy = hiy = np.nan
+            boxes[c, 0], boxes[c, 1], boxes[c, 2], boxes[c, 3] = lox, loy, hix, hiy
 
 
 def collinear_free(rows: NDArray[np.float64], rel_tol: float = 1e-9) -> NDArray[np.intp]:

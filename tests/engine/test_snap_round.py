@@ -136,6 +136,33 @@ def test_crossings_on_the_grid_agree_with_the_float_predicate(seed: int) -> None
     assert lines_cross_in_grid(pts, lens, owner) == bool(want)
 
 
+def wide_walks(seed: int, n: int = 60) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Few lines of short and long steps over a whole buffered tile: the crossing check's grid then has cells
+    many units wide, which long segments pass through by the dozen."""
+    rng = np.random.default_rng(seed)
+    lens = rng.integers(2, 12, n)
+    steps = rng.integers(-40, 41, (int(lens.sum()), 2)) * rng.choice([1, 30], (int(lens.sum()), 1))
+    starts = np.repeat(rng.integers(-64, 4160, (n, 2)), lens, axis=0)
+    first = np.repeat(np.cumsum(lens) - lens, lens)
+    pts = starts + np.cumsum(steps, axis=0) - np.cumsum(steps, axis=0)[first] + steps[first]
+    owner = rng.integers(0, n // 2, n)
+    return pts, lens, owner
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_crossings_over_a_whole_tile_agree_with_the_float_predicate(seed: int) -> None:
+    pts, lens, owner = wide_walks(seed)
+    parts = np.split(pts, np.cumsum(lens)[:-1])
+    want = {
+        (min(owner[a], owner[b]), max(owner[a], owner[b]))
+        for a, b in proper_crossing_pairs(parts)
+        if owner[a] != owner[b]
+    }
+    assert want  # the walks cross: the check has something to find
+    assert crossing_owner_pairs(pts, lens, owner) == want
+    assert lines_cross_in_grid(pts, lens, owner)
+
+
 def test_a_crossing_far_from_the_grid_origin_between_long_segments_is_found() -> None:
     pts = np.array([[-64, -64], [4160, 4100], [-64, 4100], [4160, -60]])
     assert lines_cross_in_grid(pts, np.array([2, 2]), np.array([0, 1]))

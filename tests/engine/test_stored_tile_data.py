@@ -15,8 +15,10 @@ from engine.errors import StoreError
 from engine.intervals import infer_interval
 from engine.io.source import sample_contours_path
 from engine.serve.datasets import SourceSpec, build_dataset
+from engine.serve.heads import DatasetHeads
+from engine.serve.pack import HeadColumns
 from engine.serve.renderer import Renderer
-from engine.store.sqlite import STORE_FORMAT, CCSStore
+from engine.store.sqlite import STORE_FORMAT, CCSStore, pieces_sql
 from engine.tiles.grid import Tile, buffered, tile_bounds, tiles_covering
 from engine.tiles.significance import row_significance
 from engine.types import Bounds
@@ -184,3 +186,56 @@ def test_morph_tiles_of_a_dataset_larger_than_the_contour_memory_equal_the_packe
         assert a == per_tile.morph_tile("sample", z, x, y).data, (z, x, y)
         drawn += a is not None
     assert drawn > 20
+
+
+@pytest.fixture(scope="module")
+def twice_sample_store(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The sample stored twice: every piece of one dataset lies where the other's do."""
+    path = tmp_path_factory.mktemp("stored") / "twice.sqlite"
+    store = CCSStore(path)
+    for ident in ("sample", "again"):
+        build_dataset(store, SourceSpec(sample_contours_path(), ident, ident), workers=2)
+    return path
+
+
+def test_a_tile_of_stored_pieces_leaves_out_the_pieces_of_another_dataset_in_the_same_place(
+    twice_sample_store: Path,
+) -> None:
+    store = CCSStore(twice_sample_store, readonly=True)
+    packed = Renderer(store)
+    per_tile = Renderer(store, contour_cache_bytes=1 << 20)
+    assert per_tile.pack("again") is None
+    heads = per_tile.heads("again")
+    assert heads is not None and heads.fid_range is not None  # the pieces are told apart by their fids
+    drawn = 0
+    for z, x, y in sample_tiles(store):
+        box = buffered(tile_bounds(Tile(z, x, y)), 64, 4096)
+        by_range = store.pieces_meeting("again", box, "ccs", heads.fid_range)
+        by_dataset = store.pieces_meeting("again", box, "ccs")
+        assert np.array_equal(by_range.fid, by_dataset.fid) and np.array_equal(by_range.k, by_dataset.k)
+        for method in ("ccsm", "original"):
+            a = packed.tile("again", z, x, y, method=method).data
+            assert a == per_tile.tile("again", z, x, y, method=method).data, (method, z, x, y)
+            drawn += a is not None
+    assert drawn > 20
+
+
+def test_the_fids_of_a_dataset_with_a_gap_are_no_range() -> None:
+    def heads(fid: list[int]) -> DatasetHeads:
+        n = len(fid)
+        return DatasetHeads(1, HeadColumns(np.array(fid, np.int64), np.zeros(n), np.zeros(n), np.zeros((n, 2))))
+
+    assert heads([4, 5, 6]).fid_range == (4, 6)
+    assert heads([4, 6, 7]).fid_range is None
+    assert heads([]).fid_range is None
+
+
+@pytest.mark.parametrize("by_fid", [True, False])
+@pytest.mark.parametrize("kind", ["ccs", "original"])
+def test_the_pieces_query_searches_the_rtree_first(sample_store: Path, kind: str, by_fid: bool) -> None:
+    """Walking the pieces' fid index first reads every piece of the dataset: 200 ms a tile at 64× the sample."""
+    con = sqlite3.connect(f"file:{sample_store}?mode=ro", uri=True)
+    plan = con.execute(f"EXPLAIN QUERY PLAN {pieces_sql(kind, by_fid)}", (0.0, 1.0, 0.0, 1.0, 1, 2)[: 6 - (not by_fid)])
+    steps = [row[3] for row in plan.fetchall()]
+    con.close()
+    assert steps[0].startswith("SCAN r VIRTUAL TABLE") and "PRIMARY KEY" in steps[1], steps

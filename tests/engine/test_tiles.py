@@ -107,6 +107,21 @@ def test_chunk_bounds_packed_matches_per_line():
         assert np.array_equal(boxes[chunk_off[i] : chunk_off[i + 1]], chunk_bounds([b, t]))
 
 
+def test_chunk_bounds_packed_boxes_of_chunks_with_nan_rows_are_nan_on_that_axis():
+    """Filler rows (NaN) between a tile's stored pieces must leave their chunks' boxes meeting nothing."""
+    rng = np.random.default_rng(2)
+    lines = [np.cumsum(rng.normal(size=(m, 2)), axis=0) for m in (2, 40, 97, 130)]
+    lines[1][5, 0] = np.nan  # one axis only
+    lines[2][40:71] = np.nan  # a whole chunk of filler, and the first row of the next
+    lines[3][-1, 1] = np.nan  # a line's last row, shared by no next chunk
+    tops = [v + 3 for v in lines]
+    off = np.concatenate([[0], np.cumsum([len(v) for v in lines])])
+    boxes, chunk_off = chunk_bounds_packed([np.concatenate(lines), np.concatenate(tops)], off)
+    for i, (b, t) in enumerate(zip(lines, tops, strict=True)):
+        assert np.array_equal(boxes[chunk_off[i] : chunk_off[i + 1]], chunk_bounds([b, t]), equal_nan=True)
+    assert np.isnan(boxes).any(axis=1).sum() == 1 + 2 + 1
+
+
 def test_ranges():
     assert ranges(np.array([0, 5, 7]), np.array([2, 5, 9])).tolist() == [0, 1, 7, 8]
     assert ranges(np.array([], dtype=np.int64), np.array([], dtype=np.int64)).tolist() == []

@@ -55,3 +55,53 @@ def test_a_build_compiles_nothing_after_the_warm_up() -> None:
     report = json.loads(out.stdout.strip().splitlines()[-1])
     assert report["n"] > 100
     assert report["compiled"] == []
+
+
+TILE_PROBE = """
+import json, sys, tempfile
+from pathlib import Path
+from numba.core.registry import CPUDispatcher
+from engine.warmup import warm_up
+
+
+def compiled():
+    found = {}
+    for name, module in list(sys.modules.items()):
+        if not name.startswith("engine."):
+            continue
+        for attr, value in vars(module).items():
+            if isinstance(value, CPUDispatcher):
+                found[f"{name}.{attr}"] = len(value.signatures)
+    return found
+
+
+warm_up()
+from engine.io.sample import sample_contours_path
+from engine.serve.datasets import SourceSpec, build_dataset
+from engine.serve.renderer import Renderer
+from engine.store.sqlite import CCSStore
+from engine.tiles.grid import tiles_covering
+from engine.types import Bounds
+
+with tempfile.TemporaryDirectory() as tmp:
+    store = CCSStore(Path(tmp) / "sample.sqlite")
+    build_dataset(store, SourceSpec(sample_contours_path(), "sample", "sample"), workers=1)
+    bounds = Bounds(*store.dataset("sample").bounds_3857)
+    before = compiled()
+    per_tile = Renderer(store, contour_cache_bytes=0)  # every tile joins its stored pieces
+    drawn = 0
+    for z, x, y in tiles_covering(bounds, 13)[::7]:
+        drawn += per_tile.tile("sample", z, x, y).data is not None
+    after = compiled()
+    store.close()
+print(json.dumps({"compiled": sorted(k for k, n in after.items() if n > before.get(k, 0)), "n": drawn}))
+"""
+
+
+def test_a_tile_of_stored_pieces_compiles_nothing_after_the_warm_up() -> None:
+    out = subprocess.run(
+        [sys.executable, "-c", TILE_PROBE], cwd=REPO, capture_output=True, text=True, timeout=600, check=True
+    )
+    report = json.loads(out.stdout.strip().splitlines()[-1])
+    assert report["n"] > 5
+    assert report["compiled"] == []
