@@ -8,31 +8,9 @@ kernel that gained a signature during the build.
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
-from pathlib import Path
+from tests.warmup_probe import compiled_after_warm_up
 
-REPO = Path(__file__).resolve().parents[2]
-
-PROBE = """
-import json, sys
-from numba.core.registry import CPUDispatcher
-from engine.warmup import warm_up
-
-
-def compiled():
-    found = {}
-    for name, module in list(sys.modules.items()):
-        if not name.startswith("engine."):
-            continue
-        for attr, value in vars(module).items():
-            if isinstance(value, CPUDispatcher):
-                found[f"{name}.{attr}"] = len(value.signatures)
-    return found
-
-
-warm_up()
+BUILD = """
 from engine.ccsm.build import build_contour_set
 from engine.io.sample import sample_contours_path
 from engine.io.source import read_source
@@ -40,42 +18,20 @@ from engine.params import BuildParams
 from engine.types import ContourSet
 
 source = read_source(sample_contours_path())
-before = compiled()
 part = ContourSet(source.contours[::10], source.working_crs, source.source_crs, name="part")
-built = build_contour_set(part, BuildParams(), workers=1)
-after = compiled()
-print(json.dumps({"compiled": sorted(k for k, n in after.items() if n > before.get(k, 0)), "n": len(built.surfaces)}))
+n = len(build_contour_set(part, BuildParams(), workers=1).surfaces)
 """
 
 
 def test_a_build_compiles_nothing_after_the_warm_up() -> None:
-    out = subprocess.run(
-        [sys.executable, "-c", PROBE], cwd=REPO, capture_output=True, text=True, timeout=600, check=True
-    )
-    report = json.loads(out.stdout.strip().splitlines()[-1])
-    assert report["n"] > 100
-    assert report["compiled"] == []
+    compiled, surfaces = compiled_after_warm_up(BUILD)
+    assert surfaces > 100
+    assert compiled == []
 
 
-TILE_PROBE = """
-import json, sys, tempfile
+TILES_OF_PIECES = """
+import tempfile
 from pathlib import Path
-from numba.core.registry import CPUDispatcher
-from engine.warmup import warm_up
-
-
-def compiled():
-    found = {}
-    for name, module in list(sys.modules.items()):
-        if not name.startswith("engine."):
-            continue
-        for attr, value in vars(module).items():
-            if isinstance(value, CPUDispatcher):
-                found[f"{name}.{attr}"] = len(value.signatures)
-    return found
-
-
-warm_up()
 from engine.io.sample import sample_contours_path
 from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import Renderer
@@ -83,25 +39,20 @@ from engine.store.sqlite import CCSStore
 from engine.tiles.grid import tiles_covering
 from engine.types import Bounds
 
+n = 0
 with tempfile.TemporaryDirectory() as tmp:
     store = CCSStore(Path(tmp) / "sample.sqlite")
     build_dataset(store, SourceSpec(sample_contours_path(), "sample", "sample"), workers=1)
     bounds = Bounds(*store.dataset("sample").bounds_3857)
-    before = compiled()
+    before = compiled()  # counted from here: what the tiles compile, not the build
     per_tile = Renderer(store, contour_cache_bytes=0)  # every tile joins its stored pieces
-    drawn = 0
     for z, x, y in tiles_covering(bounds, 13)[::7]:
-        drawn += per_tile.tile("sample", z, x, y).data is not None
-    after = compiled()
+        n += per_tile.tile("sample", z, x, y).data is not None
     store.close()
-print(json.dumps({"compiled": sorted(k for k, n in after.items() if n > before.get(k, 0)), "n": drawn}))
 """
 
 
 def test_a_tile_of_stored_pieces_compiles_nothing_after_the_warm_up() -> None:
-    out = subprocess.run(
-        [sys.executable, "-c", TILE_PROBE], cwd=REPO, capture_output=True, text=True, timeout=600, check=True
-    )
-    report = json.loads(out.stdout.strip().splitlines()[-1])
-    assert report["n"] > 5
-    assert report["compiled"] == []
+    compiled, drawn = compiled_after_warm_up(TILES_OF_PIECES)
+    assert drawn > 5
+    assert compiled == []
