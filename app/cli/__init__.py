@@ -13,6 +13,8 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    # Help texts give defaults in brackets ('[one per core]'): plain text, not Rich markup, which would drop them.
+    rich_markup_mode=None,
 )
 
 
