@@ -47,10 +47,11 @@ def joined(pieces: StoredPieces, fids: NDArray[np.int64]) -> tuple[tuple[NDArray
     fids = np.asarray(fids, dtype=np.int64)
     start = np.cumsum(pieces.n) - pieces.n
     sizes = np.zeros(len(fids), dtype=np.int64)
-    _line_sizes(pieces.fid, pieces.k, pieces.n, fids, sizes)
-    take = np.empty(int(sizes.sum()), dtype=np.int64)
-    _rows_taken(pieces.fid, pieces.k, pieces.n, start, fids, take)
-    columns = tuple(_gathered(c, take) for c in pieces.columns)
+    # Room for every stored row, filler after every piece and a stand-in for every contour; the walk uses less.
+    room = int(pieces.n.sum()) + FILLER_ROWS * len(pieces.n) + STAND_IN_ROWS * len(fids)
+    take = np.empty(room, dtype=np.int64)
+    used = _rows_taken(pieces.fid, pieces.k, pieces.n, start, fids, take, sizes)
+    columns = tuple(_gathered(c, take[:used]) for c in pieces.columns)
     return columns, sizes
 
 
@@ -65,36 +66,20 @@ def _gathered(column: NDArray[Any], take: NDArray[np.int64]) -> NDArray[Any]:
 
 
 @njit(cache=True)
-def _line_sizes(fid, k, n, fids, sizes):  # pragma: no cover - compiled
-    """Rows of each joined line (pieces sorted by fid and k; ``fids`` sorted; pieces of other fids skipped)."""
-    i = 0
-    for j in range(len(fids)):
-        while i < len(fid) and fid[i] < fids[j]:
-            i += 1
-        if i == len(fid) or fid[i] != fids[j]:
-            sizes[j] = STAND_IN_ROWS
-            continue
-        while i < len(fid) and fid[i] == fids[j]:
-            if i + 1 < len(fid) and fid[i + 1] == fid[i]:
-                sizes[j] += n[i] - 1 if k[i + 1] == k[i] + 1 else n[i] + FILLER_ROWS
-            else:
-                sizes[j] += n[i]
-            i += 1
-
-
-@njit(cache=True)
-def _rows_taken(fid, k, n, start, fids, take):  # pragma: no cover - compiled
-    """The stored row behind each row of the joined lines (-1: filler), as :func:`_line_sizes` counts them."""
+def _rows_taken(fid, k, n, start, fids, take, sizes):  # pragma: no cover - compiled
+    """The stored row behind each row of the joined lines (-1: filler) into ``take``, the rows of each line into
+    ``sizes``; returns how many rows ``take`` holds (pieces sorted by fid and k; ``fids`` sorted; pieces of other
+    fids skipped)."""
     i = 0
     w = 0
     for j in range(len(fids)):
+        line_start = w
         while i < len(fid) and fid[i] < fids[j]:
             i += 1
         if i == len(fid) or fid[i] != fids[j]:
             for _ in range(STAND_IN_ROWS):
                 take[w] = -1
                 w += 1
-            continue
         while i < len(fid) and fid[i] == fids[j]:
             keep, fill = n[i], 0
             if i + 1 < len(fid) and fid[i + 1] == fid[i]:
@@ -109,6 +94,8 @@ def _rows_taken(fid, k, n, start, fids, take):  # pragma: no cover - compiled
                 take[w] = -1
                 w += 1
             i += 1
+        sizes[j] = w - line_start
+    return w
 
 
 @njit(cache=True)
