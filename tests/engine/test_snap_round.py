@@ -123,15 +123,20 @@ def random_walks(seed: int, n: int = 10) -> tuple[np.ndarray, np.ndarray, np.nda
     return pts, lens, owner
 
 
-@pytest.mark.parametrize("seed", range(30))
-def test_crossings_on_the_grid_agree_with_the_float_predicate(seed: int) -> None:
-    pts, lens, owner = random_walks(seed)
+def owner_pairs_crossing_as_floats(pts: np.ndarray, lens: np.ndarray, owner: np.ndarray) -> set[tuple[int, int]]:
+    """The pairs of owners whose parts cross properly by the float predicate: what the grid check must find."""
     parts = np.split(pts, np.cumsum(lens)[:-1])
-    want = {
+    return {
         (min(owner[a], owner[b]), max(owner[a], owner[b]))
         for a, b in proper_crossing_pairs(parts)
         if owner[a] != owner[b]
     }
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_crossings_on_the_grid_agree_with_the_float_predicate(seed: int) -> None:
+    pts, lens, owner = random_walks(seed)
+    want = owner_pairs_crossing_as_floats(pts, lens, owner)
     assert crossing_owner_pairs(pts, lens, owner) == want
     assert lines_cross_in_grid(pts, lens, owner) == bool(want)
 
@@ -152,12 +157,7 @@ def wide_walks(seed: int, n: int = 60) -> tuple[np.ndarray, np.ndarray, np.ndarr
 @pytest.mark.parametrize("seed", range(20))
 def test_crossings_over_a_whole_tile_agree_with_the_float_predicate(seed: int) -> None:
     pts, lens, owner = wide_walks(seed)
-    parts = np.split(pts, np.cumsum(lens)[:-1])
-    want = {
-        (min(owner[a], owner[b]), max(owner[a], owner[b]))
-        for a, b in proper_crossing_pairs(parts)
-        if owner[a] != owner[b]
-    }
+    want = owner_pairs_crossing_as_floats(pts, lens, owner)
     assert want  # the walks cross: the check has something to find
     assert crossing_owner_pairs(pts, lens, owner) == want
     assert lines_cross_in_grid(pts, lens, owner)
