@@ -7,6 +7,7 @@ degree-3 surface fit -> tessellation into two boundary rows -> similarity table.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,6 +21,9 @@ from engine.geom.douglas_peucker import douglas_peucker, douglas_peucker_count
 from engine.geom.polyline import closed_path, path_length, ring_area
 from engine.params import BuildParams
 from engine.types import Contour, Coords, FeatureId
+
+if TYPE_CHECKING:
+    import trimesh
 
 #: A piece shorter than this many samples cannot carry a cubic; short contours get a finer spacing.
 MIN_SAMPLES = 8
@@ -77,7 +81,7 @@ class CCS:
         """Sim(L0, slice(t)), interpolated from the table."""
         return float(np.interp(check_t(t), self.sim_t, self.sim))
 
-    def mesh(self, heights: int | None = None):  # type: ignore[no-untyped-def]
+    def mesh(self, heights: int | None = None) -> trimesh.Trimesh:
         """The CCS-mesh as a ``trimesh.Trimesh`` in (x, y, t) (rows in t: see ``engine.ccsm.slicing.mesh_rows``)."""
         return ccs_mesh(self.base, self.top, heights)
 

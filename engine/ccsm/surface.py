@@ -16,6 +16,7 @@ the same averaged parameters); clamped knots would leave a kink at the seam.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,6 +24,9 @@ from scipy.interpolate import BSpline, make_interp_spline
 
 from engine.errors import SurfaceFitError
 from engine.types import Coords
+
+if TYPE_CHECKING:
+    from geomdl import BSpline as GeomdlBSpline
 
 DEGREE = 3
 #: Heights of the wireframe rows on every characteristic link (paper: four points per link).
@@ -97,7 +101,7 @@ class CCSurface:
         xy = (1.0 - vv)[:, None] * c0 + vv[:, None] * cn
         return np.column_stack([xy, vv])
 
-    def curves_to_geomdl(self):  # type: ignore[no-untyped-def]
+    def curves_to_geomdl(self) -> tuple[GeomdlBSpline.Curve, GeomdlBSpline.Curve]:
         """The boundary curves L0' (height 0) and Ln' (height 1) as geomdl ``BSpline.Curve`` objects (degree 3).
 
         Only for open contours: geomdl has no periodic knot vectors.
@@ -113,9 +117,9 @@ class CCSurface:
             curve.ctrlpts = [[float(x), float(y)] for x, y in spline.c]
             curve.knotvector = [float(k) for k in spline.t]
             curves.append(curve)
-        return tuple(curves)
+        return curves[0], curves[1]
 
-    def to_geomdl(self):  # type: ignore[no-untyped-def]
+    def to_geomdl(self) -> GeomdlBSpline.Surface:
         """The surface as a geomdl ``BSpline.Surface`` (degree 3 x 3, control net N x 4).
 
         Only for open contours: geomdl has no periodic knot vectors.

@@ -56,7 +56,7 @@ def _fmt(v: Any) -> Any:
     return v
 
 
-def _pyplot():  # type: ignore[no-untyped-def]
+def _pyplot() -> Any:  # matplotlib.pyplot, a module: imported late so the engine loads without a display
     import matplotlib
 
     matplotlib.use("Agg")
