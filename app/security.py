@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hmac
 import ipaddress
+import re
 from typing import Annotated
 
 from fastapi import Depends, Request
@@ -24,7 +25,7 @@ from app.settings import Settings
 #: Media types a write body may have (neither can be sent cross-site without a preflight).
 JSON_TYPES = frozenset({"application/json", "application/geo+json"})
 #: Host names a tokenless local write may address the server by.
-LOOPBACK_NAMES = frozenset({"localhost", "127.0.0.1", "[::1]", "::1"})
+LOOPBACK_NAMES = frozenset({"localhost", "127.0.0.1", "[::1]"})
 
 
 def _is_loopback(host: str | None) -> bool:
@@ -36,11 +37,28 @@ def _is_loopback(host: str | None) -> bool:
         return False
 
 
-def _host_name(request: Request) -> str:
-    host = request.headers.get("host", "").strip().lower()
-    if host.startswith("["):  # [::1]:8000
-        return host.split("]", 1)[0] + "]"
-    return host.rsplit(":", 1)[0] if host.count(":") == 1 else host
+#: ``Host`` as RFC 9110 writes it: a bracketed IPv6 literal or a name / IPv4 address, then an optional port.
+_HOST_HEADER = re.compile(r"(?:\[(?P<ipv6>[0-9a-f:.]+)\]|(?P<name>[a-z0-9.-]+))(?::(?P<port>[0-9]{1,5}))?")
+
+
+def host_name(header: str) -> str | None:
+    """The host a ``Host`` header names, or None when the header is not one well-formed host[:port].
+
+    The whole value must match (no trailing junk such as ``[::1]evil.com``); an IPv6 literal is normalised
+    (``[0:0:0:0:0:0:0:1]`` -> ``[::1]``).
+
+    >>> host_name("[::1]:8000"), host_name("LOCALHOST"), host_name("[::1]evil.com")
+    ('[::1]', 'localhost', None)
+    """
+    match = _HOST_HEADER.fullmatch(header.strip().lower())
+    if match is None or (match["port"] is not None and int(match["port"]) > 65535):
+        return None
+    if match["ipv6"] is None:
+        return match["name"]
+    try:
+        return f"[{ipaddress.IPv6Address(match['ipv6']).compressed}]"
+    except ValueError:
+        return None
 
 
 def require_writer(request: Request, settings: Annotated[Settings, Depends(get_settings)]) -> None:
@@ -58,7 +76,7 @@ def require_writer(request: Request, settings: Annotated[Settings, Depends(get_s
         raise WriteForbidden(
             "writes are off for remote clients: set CCSM_ADMIN_TOKEN on the server and send it as a bearer token"
         )
-    if _host_name(request) not in LOOPBACK_NAMES:
+    if host_name(request.headers.get("host", "")) not in LOOPBACK_NAMES:
         raise WriteForbidden(
             "without CCSM_ADMIN_TOKEN, writes must address the server as localhost, 127.0.0.1 or [::1]"
         )
