@@ -15,12 +15,12 @@ from contextlib import asynccontextmanager
 from typing import Any
 
 from fastapi import FastAPI, Request
-from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.api_docs import add_api_docs
+from app.cors import JsonCORSMiddleware
 from app.errors import add_exception_handlers, error_body, public_message
 from app.head_requests import HeadAsGetMiddleware
 from app.lifespan import lifespan
@@ -126,7 +126,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             app.mount("/vendor/maplibre-gl", StaticFiles(directory=vendor), name="vendor-maplibre")
         app.mount("/web", StaticFiles(directory=web_dir), name="web")
     app.add_middleware(
-        CORSMiddleware,
+        JsonCORSMiddleware,
         allow_origins=settings.cors_origins,
         allow_methods=["GET", "HEAD"],
         allow_headers=["*"],
