@@ -31,8 +31,10 @@ from engine.parallel import map_ordered
 from engine.params import BuildParams
 from engine.serve.labels import label_placer
 from engine.serve.records import contour_rows, dataset_meta
+from engine.store.records import DatasetInfo, NewContour
+from engine.store.schema import STORE_FORMAT
 from engine.store.spool import DiskSpool
-from engine.store.sqlite import STORE_FORMAT, CCSStore, DatasetInfo, NewContour
+from engine.store.store import CCSStore
 from engine.types import Contour, ContourSet
 
 Progress = Callable[[int, int], None]
