@@ -22,9 +22,8 @@ from engine.ccsm.spool import MemorySpool
 from engine.errors import StoreError
 from engine.parallel import local_pool, map_ordered
 from engine.params import BuildParams
-from engine.scratch import SCRATCH_PREFIX, host_name, remove_stale_scratch
+from engine.scratch import SCRATCH_PREFIX, DiskSpool, host_name, remove_stale_scratch
 from engine.serve.datasets import SourceSpec, build_dataset
-from engine.store.spool import DiskSpool
 from engine.store.store import CCSStore
 from tests.app.conftest import write_geojson
 from tests.engine.test_blocks import ring_clusters
