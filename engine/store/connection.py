@@ -18,7 +18,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from engine.errors import StoreError, StoreFormatError, StoreUnwritable
-from engine.store.schema import STORE_FORMAT, create_schema, stored_format
+from engine.store.schema import SCHEMA, STORE_FORMAT
 
 #: SQLite's messages for a write the file system refuses (full disk, read-only mount or file, I/O error).
 _UNWRITABLE_MESSAGES = ("database or disk is full", "readonly database", "disk i/o error", "unable to open")
@@ -32,6 +32,22 @@ def unwritable_reason(exc: BaseException) -> str | None:
     if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EROFS, errno.EACCES, errno.EDQUOT, errno.EPERM):
         return os.strerror(exc.errno or 0)
     return None
+
+
+def create_schema(con: sqlite3.Connection) -> None:
+    """Create the tables a new file lacks and, in a new file, its format and version counter."""
+    con.executescript(SCHEMA)
+    row = con.execute("SELECT value FROM store_meta WHERE key='format'").fetchone()
+    if row is None:
+        con.execute("INSERT OR IGNORE INTO store_meta VALUES ('format', ?)", (str(STORE_FORMAT),))
+        con.execute("INSERT OR IGNORE INTO store_meta VALUES ('version_counter', '0')")
+        con.commit()
+
+
+def stored_format(con: sqlite3.Connection) -> int | None:
+    """The format the file says it has (None: not a ccsm store)."""
+    row = con.execute("SELECT value FROM store_meta WHERE key='format'").fetchone()
+    return None if row is None else int(row[0])
 
 
 class StoreFile:

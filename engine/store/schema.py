@@ -1,12 +1,10 @@
-"""The layout of a store file: its tables (SQL), its format number, and creating or checking them.
+"""The layout of a store file: its tables (SQL) and its format number (applied by :mod:`engine.store.connection`).
 
 Every table is here, the build bookkeeping's ``builds`` table too (:mod:`engine.store.builds`), so a store
 file is made in one script and its format is one number.
 """
 
 from __future__ import annotations
-
-import sqlite3
 
 #: Bumped whenever the layout of the file changes; a store of another format is refused.
 STORE_FORMAT = 3
@@ -114,18 +112,3 @@ CREATE TABLE IF NOT EXISTS builds(
 );
 """
 
-
-def create_schema(con: sqlite3.Connection) -> None:
-    """Create the tables a new file lacks and, in a new file, its format and version counter."""
-    con.executescript(SCHEMA)
-    row = con.execute("SELECT value FROM store_meta WHERE key='format'").fetchone()
-    if row is None:
-        con.execute("INSERT OR IGNORE INTO store_meta VALUES ('format', ?)", (str(STORE_FORMAT),))
-        con.execute("INSERT OR IGNORE INTO store_meta VALUES ('version_counter', '0')")
-        con.commit()
-
-
-def stored_format(con: sqlite3.Connection) -> int | None:
-    """The format the file says it has (None: not a ccsm store)."""
-    row = con.execute("SELECT value FROM store_meta WHERE key='format'").fetchone()
-    return None if row is None else int(row[0])
