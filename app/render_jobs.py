@@ -25,7 +25,7 @@ from engine.serve.relief import ReliefCache
 from engine.serve.renderer import Renderer, TileOptions
 from engine.serve.simplify import feature_collection
 from engine.serve.simplify import simplify as simplify_dataset
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 from engine.tiles.grid import Tile
 from engine.tiles.hillshade import hillshade_tile
 

@@ -29,7 +29,8 @@ from engine.scratch import pid_alive
 from engine.serve.build_job import BuildJob
 from engine.serve.datasets import RELIEF_DEM_KEY, SourceSpec, build_lock, slugify, source_hash
 from engine.serve.renderer import Renderer, TileOptions
-from engine.store.sqlite import CCSStore, DatasetInfo
+from engine.store.records import DatasetInfo
+from engine.store.store import CCSStore
 from engine.tiles.grid import mercator_to_lonlat
 from engine.tiles.scale import zoom_for_scale
 

@@ -31,7 +31,7 @@ from app.errors import UploadCheckFailed, UploadQueueFull, UploadTooLarge
 from app.settings import Settings
 from app.upload_check import CheckedUpload, UploadCheck, checker_main
 from engine.errors import StoreUnwritable
-from engine.store.sqlite import unwritable_reason
+from engine.store.connection import unwritable_reason
 
 log = logging.getLogger("ccsm.uploads")
 

@@ -113,7 +113,7 @@ def build(
 def tiles_digest(store_path: Path) -> str:
     """SHA-256 over every z12 tile of the dataset and a z14 sample: equal digests, equal tiles."""
     from engine.serve.renderer import Renderer
-    from engine.store.sqlite import CCSStore
+    from engine.store.store import CCSStore
     from engine.tiles.grid import tiles_covering
     from engine.types import Bounds
 

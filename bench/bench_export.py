@@ -39,7 +39,7 @@ sys.path.insert(0, str(REPO))
 from engine.ccsm.build import default_workers  # noqa: E402
 from engine.io.source import read_source, sample_contours_path, write_geojson  # noqa: E402
 from engine.serve.export import export_dataset  # noqa: E402
-from engine.store.sqlite import CCSStore  # noqa: E402
+from engine.store.store import CCSStore  # noqa: E402
 from engine.types import Contour, ContourSet  # noqa: E402
 
 WORK = REPO / "var" / "bench" / "export"

@@ -121,7 +121,7 @@ def build_one(path: Path, interval: float, workers: int, cache_mb: float | None 
     import engine.ccsm.build as build_module
     import engine.serve.datasets as datasets_module
     from engine.serve.datasets import SourceSpec, build_dataset
-    from engine.store.sqlite import CCSStore
+    from engine.store.store import CCSStore
 
     phase_s = {"read": 0.0, "repair": 0.0, "write": 0.0}
     peak_mb = {}  # the build process's peak RSS when each phase ended
@@ -187,7 +187,7 @@ def tile_run(
     what a renderer does once per version, e.g. reading the label anchors), its store read through ``mmap_mb``
     of memory mapping (as a render worker's, CCSM_STORE_MMAP_MB; 0: none)."""
     from engine.serve.renderer import Renderer
-    from engine.store.sqlite import CCSStore
+    from engine.store.store import CCSStore
     from engine.tiles.grid import tiles_covering
     from engine.types import Bounds
 

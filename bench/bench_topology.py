@@ -43,7 +43,7 @@ from engine.geom.polyline import closed_path
 from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import Renderer, TileOptions
 from engine.serve.simplify import simplify
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 from engine.tiles.grid import tiles_covering
 from engine.tiles.scale import zoom_for_scale
 from engine.types import Bounds

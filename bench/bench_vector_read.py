@@ -64,8 +64,8 @@ def contour_files(size: int, formats: list[str]) -> list[Path]:
 def read_one(path: Path, mode: str) -> dict[str, float]:
     """Read ``path`` through a scratch file in this process; seconds, contours, RSS before and at the peak."""
     import engine.io.vector as vector
-    from engine.io.scratch import ReadScratch
     from engine.io.source import read_source
+    from engine.scratch import ReadScratch
 
     if mode == "whole":
         vector.READ_VERTICES = 1 << 40

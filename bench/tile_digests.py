@@ -22,7 +22,7 @@ def main() -> None:
     from engine.io.source import sample_contours_path
     from engine.serve.datasets import SourceSpec, build_dataset
     from engine.serve.renderer import Renderer
-    from engine.store.sqlite import CCSStore
+    from engine.store.store import CCSStore
     from engine.tiles.grid import tiles_covering
     from engine.types import Bounds
 

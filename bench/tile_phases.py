@@ -39,7 +39,6 @@ def instrument(spent: dict[str, float]) -> None:
     import engine.serve.pack as pack
     import engine.serve.pieces as pieces
     import engine.serve.renderer as renderer
-    import engine.store.sqlite as sqlite
 
     stack: list[str] = []
 
@@ -58,7 +57,15 @@ def instrument(spent: dict[str, float]) -> None:
 
         return wrapper
 
-    store = sqlite.CCSStore
+    try:
+        import engine.store.store as store_module
+
+        decode = "piece_column"
+    except ImportError:  # a checkout from before the store was split
+        import engine.store.sqlite as store_module  # type: ignore[no-redef]
+
+        decode = "_column"
+    store = store_module.CCSStore
     store.data_version = timed("info", store.data_version)  # type: ignore[method-assign]
     store.dataset = timed("info", store.dataset)  # type: ignore[method-assign]
     store.query = timed("query", store.query)  # type: ignore[method-assign]
@@ -71,7 +78,7 @@ def instrument(spent: dict[str, float]) -> None:
         pass
     if hasattr(store, "pieces_meeting"):
         store.pieces_meeting = timed("pieces sql", store.pieces_meeting)  # type: ignore[method-assign]
-    sqlite._column = timed("pieces decode", sqlite._column)
+    setattr(store_module, decode, timed("pieces decode", getattr(store_module, decode)))
     pieces.joined = timed("join", pieces.joined)
     pack.DatasetPack.of_lines = classmethod(timed("pack", pack.DatasetPack.of_lines.__func__))  # type: ignore[method-assign]
     pieces.LineSet.of = classmethod(timed("pack", pack.LineSet.of.__func__))  # type: ignore[method-assign]
@@ -103,7 +110,7 @@ def main() -> None:
     parser.add_argument("--n", type=int, default=120)
     args = parser.parse_args()
     from engine.serve.renderer import Renderer
-    from engine.store.sqlite import CCSStore
+    from engine.store.store import CCSStore
 
     spent: dict[str, float] = defaultdict(float)
     instrument(spent)

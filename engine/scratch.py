@@ -1,6 +1,13 @@
 """Scratch files of a build in progress: SQLite files beside the store that hold what the build has read or
 made until it is written, so a build's memory does not grow with the dataset (docs/design.md section 6).
 
+This is the one home of the mechanism. A scratch file holds **named lists of pickled objects** by position
+(:class:`ReadScratch`); a reader appends to its lists and reads them back in order (a DEM's traced levels, a
+vector source's checked batches, the usable contours as :class:`ScratchContours`), and a build keeps its
+surfaces in one list by their number (:class:`DiskSpool`, the on-disk form of ``engine.ccsm.spool.Spool``).
+What stays elsewhere is not a second copy: ``engine.ccsm.spool`` holds only the method's protocol and its
+in-memory form (the method may not touch SQLite), and opens what :meth:`DiskSpool.get_payloads` sends.
+
 A scratch file is not the store: no server reads it, it is written without a journal or fsync (a killed build
 only leaves it to be removed) and it is deleted when the build ends. Its name carries the host and process
 id of the build that writes it, so the next build in that directory removes one whose build no longer runs.
@@ -9,14 +16,20 @@ id of the build that writes it, so the next build in that directory removes one 
 from __future__ import annotations
 
 import os
+import pickle
 import sqlite3
 import tempfile
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
+from typing import Any, overload
 
 from engine.errors import StoreError
+from engine.types import Contour
 
 #: Name prefix of scratch files, followed by the host and the process id of the build that writes it.
 SCRATCH_PREFIX = ".ccsm-spool-"
+#: Rows read per SQL statement (SQLite's default limit on bound parameters is 32,766).
+READ_BATCH = 500
 
 
 def host_name() -> str:
@@ -65,3 +78,173 @@ def open_scratch(directory: str | os.PathLike[str], schema: str) -> tuple[Path, 
     # Scratch data: no journal, no fsync. A crash loses only this file, which nothing else reads.
     con.executescript(f"PRAGMA journal_mode=OFF; PRAGMA synchronous=OFF; PRAGMA cache_size=-16000; {schema}")
     return Path(name), con
+
+
+def _pickled(o: Any) -> bytes:
+    return pickle.dumps(o, protocol=pickle.HIGHEST_PROTOCOL)
+
+
+class ReadScratch:
+    """A scratch file in ``directory`` of named lists of objects (pickled) by position: appended to and read
+    back in order, or put and got at given positions.
+
+    Raises
+    ------
+    StoreError
+        The file cannot be made or written (a read-only directory, a full disk).
+
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     scratch = ReadScratch(d)
+    ...     scratch.extend("a", ["x", "y", "z"])
+    ...     scratch.extend("a", ["w"])
+    ...     list(scratch.read("a")), scratch.count("a"), scratch.read_range("a", 1, 3), scratch.count("b")
+    ...     scratch.close()
+    (['x', 'y', 'z', 'w'], 4, ['y', 'z'], 0)
+    """
+
+    def __init__(self, directory: str | os.PathLike[str]) -> None:
+        self.path: Path
+        self.path, self._con = open_scratch(
+            directory, "CREATE TABLE items (list TEXT, seq INTEGER, blob BLOB NOT NULL, PRIMARY KEY (list, seq));"
+        )
+        self._counts: dict[str, int] = {}
+
+    def _insert(self, rows: list[tuple[str, int, bytes]]) -> None:
+        try:
+            self._con.executemany("INSERT OR REPLACE INTO items VALUES (?, ?, ?)", rows)
+        except sqlite3.OperationalError as exc:  # a full disk, mostly
+            raise StoreError(f"the build's scratch file {self.path.name}: {exc}") from exc
+
+    def extend(self, name: str, objects: Iterable[Any]) -> None:
+        """Append ``objects`` to list ``name``."""
+        start = self._counts.get(name, 0)
+        rows = [(name, start + k, _pickled(o)) for k, o in enumerate(objects)]
+        self._insert(rows)
+        self._counts[name] = start + len(rows)
+
+    def put_many(self, name: str, items: Iterable[tuple[int, Any]]) -> None:
+        """Keep objects at given positions of list ``name``, replacing what was there."""
+        rows = [(name, int(i), _pickled(o)) for i, o in items]
+        self._insert(rows)
+        self._counts[name] = max([self._counts.get(name, 0), *(i + 1 for _, i, _ in rows)])
+
+    def count(self, name: str) -> int:
+        """One past the last position of list ``name`` (its length when filled in order)."""
+        return self._counts.get(name, 0)
+
+    def read_range(self, name: str, start: int, stop: int) -> list[Any]:
+        """Objects ``start`` .. ``stop`` - 1 of list ``name``."""
+        rows = self._con.execute(
+            "SELECT blob FROM items WHERE list = ? AND seq >= ? AND seq < ? ORDER BY seq", (name, start, stop)
+        )
+        return [pickle.loads(blob) for (blob,) in rows]
+
+    def read(self, name: str, batch: int = READ_BATCH) -> Iterator[Any]:
+        """Every object of list ``name`` in order, ``batch`` read at a time (1 for big objects)."""
+        for start in range(0, self.count(name), batch):
+            yield from self.read_range(name, start, start + batch)
+
+    def payloads(self, name: str, positions: Sequence[int]) -> list[bytes]:
+        """The objects at ``positions`` of list ``name`` as stored (pickles), in that order.
+
+        Raises
+        ------
+        KeyError
+            A position holds nothing.
+        """
+        wanted = [int(i) for i in positions]
+        found: dict[int, bytes] = {}
+        for start in range(0, len(wanted), READ_BATCH):
+            batch = sorted(set(wanted[start : start + READ_BATCH]) - found.keys())
+            marks = ",".join("?" * len(batch))
+            sql = f"SELECT seq, blob FROM items WHERE list = ? AND seq IN ({marks})"
+            for i, blob in self._con.execute(sql, (name, *batch)):
+                found[int(i)] = blob
+        missing = [i for i in wanted if i not in found]
+        if missing:
+            raise KeyError(f"not in the scratch list {name!r}: {missing[:5]}")
+        return [found[i] for i in wanted]
+
+    def drop(self, name: str) -> None:
+        """Forget list ``name`` (its space is reused by later lists)."""
+        self._con.execute("DELETE FROM items WHERE list = ?", (name,))
+        self._counts.pop(name, None)
+
+    def close(self) -> None:
+        """Delete the file."""
+        self._con.close()
+        self.path.unlink(missing_ok=True)
+
+
+class ScratchContours(Sequence[Contour]):
+    """The contours of list ``name`` of a :class:`ReadScratch`, as a read-only sequence: each read when asked
+    (a slice in one statement), iterated a batch at a time."""
+
+    def __init__(self, scratch: ReadScratch, name: str) -> None:
+        self.scratch = scratch
+        self.name = name
+
+    def __len__(self) -> int:
+        return self.scratch.count(self.name)
+
+    @overload
+    def __getitem__(self, index: int) -> Contour: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> list[Contour]: ...
+
+    def __getitem__(self, index: int | slice) -> Contour | list[Contour]:
+        n = len(self)
+        if isinstance(index, slice):
+            start, stop, step = index.indices(n)
+            items = self.scratch.read_range(self.name, start, stop) if step > 0 and start < stop else []
+            return items[::step] if step != 1 else items
+        k = index + n if index < 0 else index
+        if not 0 <= k < n:
+            raise IndexError(f"contour {index} of {n}")
+        return self.scratch.read_range(self.name, k, k + 1)[0]
+
+    def __iter__(self) -> Iterator[Contour]:
+        return self.scratch.read(self.name)
+
+
+class DiskSpool:
+    """A build's surfaces by number, in a scratch file in ``directory`` (the store's, so on the same disk):
+    the ``engine.ccsm.spool.Spool`` protocol on one list of a :class:`ReadScratch`.
+
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     spool = DiskSpool(d)
+    ...     spool.put(3, "surface")
+    ...     spool.get([3, 3]), spool.path.exists()
+    ...     spool.close()
+    ...     spool.path.exists()
+    (['surface', 'surface'], True)
+    False
+    """
+
+    #: The scratch list of the surfaces.
+    LIST = "surfaces"
+
+    def __init__(self, directory: str | os.PathLike[str]) -> None:
+        self._scratch = ReadScratch(directory)
+        self.path = self._scratch.path
+
+    def put(self, index: int, surface: Any) -> None:  # noqa: D102
+        self.put_many([(index, surface)])
+
+    def put_many(self, items: Iterable[tuple[int, Any]]) -> None:
+        """Keep several surfaces in one statement."""
+        self._scratch.put_many(self.LIST, items)
+
+    def get(self, indices: Sequence[int]) -> list[Any]:  # noqa: D102
+        return [pickle.loads(blob) for blob in self.get_payloads(indices)]
+
+    def get_payloads(self, indices: Sequence[int]) -> list[bytes]:
+        """The surfaces numbered ``indices`` as stored (pickles): sent to a worker as they are, so this process
+        neither unpickles nor pickles them again (``engine.ccsm.spool.surface_of`` opens them there)."""
+        return self._scratch.payloads(self.LIST, indices)
+
+    def close(self) -> None:  # noqa: D102
+        self._scratch.close()

@@ -69,7 +69,7 @@ class Contour:
 
 class ContourSubset(Sequence[Contour]):
     """The contours at ``positions`` (increasing) of a sequence, each read from it when asked: the usable
-    contours of a set whose contours wait on disk (``engine.io.scratch``). A slice costs one slice of the
+    contours of a set whose contours wait on disk (``engine.scratch``). A slice costs one slice of the
     underlying sequence, so reading in chunks stays one read per chunk.
     """
 

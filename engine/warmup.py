@@ -81,7 +81,7 @@ def _render_one_tile(ring: np.ndarray, line: np.ndarray) -> None:
     from engine.params import BuildParams
     from engine.serve.datasets import save_built
     from engine.serve.renderer import Renderer
-    from engine.store.sqlite import CCSStore
+    from engine.store.store import CCSStore
     from engine.tiles.grid import tiles_covering
     from engine.types import Bounds, Contour, ContourSet
 

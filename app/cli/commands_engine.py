@@ -28,7 +28,8 @@ from engine.types import BadFeature
 if TYPE_CHECKING:
     from engine.cartography.options import CartographyOptions
     from engine.evaluation.topology import ScaleTopology
-    from engine.store.sqlite import CCSStore, DatasetInfo
+    from engine.store.records import DatasetInfo
+    from engine.store.store import CCSStore
     from engine.types import ContourSet
 
 err_console = Console(stderr=True)
@@ -139,7 +140,7 @@ def _open_cache(path: Path, *, is_default: bool) -> CCSStore:
     earlier version of ccsm) is replaced by a new one, as the content hashes would rebuild it anyway. A store
     given with ``--store`` is the user's, and is never replaced (its format error is shown)."""
     from engine.errors import StoreFormatError
-    from engine.store.sqlite import CCSStore
+    from engine.store.store import CCSStore
 
     try:
         return CCSStore(path)

@@ -70,7 +70,7 @@ def _service_store() -> Path:
 
 def _stored_dataset(store: Path, dataset: str, what: str) -> None:
     """Exit 2 unless ``store`` holds ``dataset`` (``what`` names it in the message)."""
-    from engine.store.sqlite import CCSStore
+    from engine.store.store import CCSStore
 
     if not store.is_file():
         fail(f"{what}: no such file, and no store at {store} to look it up in (give --store PATH)")

@@ -14,7 +14,7 @@ import typer
 from app.cli import app
 
 if TYPE_CHECKING:
-    from engine.store.sqlite import CCSStore as CCSStoreType
+    from engine.store.store import CCSStore as CCSStoreType
 
 SourcesArg = Annotated[
     list[Path] | None,
@@ -153,7 +153,7 @@ def build(
     from app.settings import Settings
     from engine.errors import CCSMError
     from engine.serve.datasets import SourceSpec, build_dataset, slugify
-    from engine.store.sqlite import CCSStore
+    from engine.store.store import CCSStore
 
     console = Console(stderr=True)
     if scheduler is not None:

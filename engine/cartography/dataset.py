@@ -10,10 +10,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from engine.cartography.labels import LabelAnchors, LabelSource, first_label_zoom
+from engine.cartography.labels import LabelSource, first_label_zoom
 from engine.cartography.options import CartographyOptions
 from engine.cartography.schedule import ZOOM_DECIMALS, Schedule, make_schedule
-from engine.store.sqlite import ContourRecord, DatasetInfo
+from engine.store.records import ContourRecord, DatasetInfo, LabelAnchors
 from engine.tiles.grid import mercator_to_lonlat
 from engine.tiles.scale import zoom_for_scale
 

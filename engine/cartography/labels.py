@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 
 from engine.ccsm.regression import t_at_scales
 from engine.parallel import map_ordered
+from engine.store.records import LabelAnchors
 from engine.tiles.scale import EARTH_RADIUS_M, TILE_SIZE_PX, scale_for_zoom, zoom_for_scale
 
 #: EPSG:3857 metres per pixel at zoom 0 (512 px tiles).
@@ -59,55 +60,6 @@ class LabelSource:
     top: NDArray[np.float64]
     t_at_scale: NDArray[np.float64]
     first_zoom: float
-
-
-@dataclass(frozen=True)
-class LabelAnchors:
-    """Placed labels, one entry each (arrays aligned).
-
-    Attributes
-    ----------
-    xy
-        (n, 2) EPSG:3857 anchor points.
-    angle
-        (n,) degrees for MapLibre's ``text-rotate``: clockwise, 0 = text runs west to east, in [-90, 90].
-    min_zoom
-        (n,) zoom from which the label is shown.
-    fid, rank
-        (n,) contour of each label and its rank.
-    elevation
-        (n,) its elevation.
-    text
-        The label texts.
-    box_px
-        (n, 2) width and height of each label's axis-aligned screen box (rotation included, padding included).
-    """
-
-    xy: NDArray[np.float64]
-    angle: NDArray[np.float64]
-    min_zoom: NDArray[np.float64]
-    fid: NDArray[np.int64]
-    rank: NDArray[np.int64]
-    elevation: NDArray[np.float64]
-    text: list[str]
-    box_px: NDArray[np.float64]
-
-    def __len__(self) -> int:
-        return len(self.fid)
-
-    def select(self, keep: NDArray[np.bool_] | NDArray[np.intp]) -> LabelAnchors:
-        """The labels chosen by a mask or positions."""
-        pos = np.flatnonzero(keep) if np.asarray(keep).dtype == np.bool_ else np.asarray(keep)
-        return LabelAnchors(
-            self.xy[pos],
-            self.angle[pos],
-            self.min_zoom[pos],
-            self.fid[pos],
-            self.rank[pos],
-            self.elevation[pos],
-            [self.text[i] for i in pos.tolist()],
-            self.box_px[pos],
-        )
 
 
 def metres_per_px(zoom: float | NDArray[np.float64]) -> NDArray[np.float64]:

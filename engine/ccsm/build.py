@@ -208,7 +208,7 @@ def build_into(
     """Build the CCS of every contour of ``contour_set`` into ``spool``, then repair crossings block by block.
 
     Surfaces go to the spool as their chunks come back, and the repair reads one block's surfaces at a time,
-    so with a spool on disk (``engine.store.spool.DiskSpool``) the build holds the input contours and a few chunks and
+    so with a spool on disk (``engine.scratch.DiskSpool``) the build holds the input contours and a few chunks and
     blocks, not every surface (docs/design.md section 6).
 
     Parameters

@@ -1,9 +1,12 @@
 """Where a build keeps the surfaces it has made until they are written (docs/design.md section 6).
 
 A small build keeps them in memory (:class:`MemorySpool`). A big one keeps them in a scratch file beside the
-store (``engine.store.spool.DiskSpool``), so the build's memory holds only the surfaces of the chunk, block or
+store (``engine.scratch.DiskSpool``), so the build's memory holds only the surfaces of the chunk, block or
 batch at hand, whatever the size of the set: the crossing repair reads back one block's surfaces at a time,
 and the store is written batch by batch from the spool. The method only knows the :class:`Spool` protocol.
+
+Only the protocol and the in-memory form live here: the disk form is a list of the one scratch-file mechanism
+(:mod:`engine.scratch`), which the method may not import (it touches no SQLite; an import contract says so).
 """
 
 from __future__ import annotations

@@ -21,8 +21,8 @@ from rasterio.errors import RasterioError
 from engine.errors import InvalidParameter, SourceError
 from engine.intervals import UNIT_NAMES
 from engine.io.crs import WGS84, parse_crs
-from engine.io.scratch import ReadScratch
 from engine.io.vector import LineParts, assemble_batches, in_batches
+from engine.scratch import ReadScratch
 from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
 from engine.types import BadFeature, ContourSet, FeatureId
 
@@ -101,7 +101,7 @@ def contours_from_dem(
     executor
         Where the windows are traced (see :mod:`engine.parallel`); None = in this process.
     scratch
-        Where the traced lines and the contours wait (:class:`~engine.io.scratch.ReadScratch`), so that the
+        Where the traced lines and the contours wait (:class:`~engine.scratch.ReadScratch`), so that the
         memory holds one level at a time; None = in memory.
 
     Returns

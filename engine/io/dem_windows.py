@@ -11,7 +11,7 @@ vertex of the line at every window edge at every scale.
 
 Only one window of heights is in memory at a time; the windows can be traced on a process pool or a Dask
 cluster (:mod:`engine.parallel`). The traced pieces wait, level by level, in the reader's scratch file when
-one is given (:class:`~engine.io.scratch.ReadScratch`), and the levels are joined one at a time as they are
+one is given (:class:`~engine.scratch.ReadScratch`), and the levels are joined one at a time as they are
 read on, so the whole DEM's lines are never in memory at once.
 """
 
@@ -31,8 +31,8 @@ from scipy.spatial import cKDTree
 
 from engine.errors import InvalidParameter, SourceError
 from engine.io.dem import LevelLines, contour_levels, iter_levels
-from engine.io.scratch import ReadScratch
 from engine.parallel import map_ordered
+from engine.scratch import ReadScratch
 
 #: Window side in cells when the caller gives none: 2049 × 2049 float64 heights are 34 MB.
 DEFAULT_BLOCK = 2048

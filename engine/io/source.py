@@ -15,8 +15,8 @@ from engine.errors import InvalidParameter, SourceError
 from engine.io.crs import choose_working_crs, make_transformer
 from engine.io.dem import DEM_SUFFIXES, contours_from_dem
 from engine.io.sample import sample_contours_path, sample_dem_path
-from engine.io.scratch import ReadScratch
 from engine.io.vector import VECTOR_SUFFIXES, read_contours, write_geojson
+from engine.scratch import ReadScratch
 from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
 from engine.types import ContourSet
 
@@ -68,7 +68,7 @@ def read_source(
         DEMs only: the window side and where windows are traced (see
         :func:`engine.io.dem.contours_from_dem`).
     scratch
-        Where what is read waits, in a scratch file rather than in memory (:mod:`engine.io.scratch`): a DEM
+        Where what is read waits, in a scratch file rather than in memory (:mod:`engine.scratch`): a DEM
         is then held one level at a time, and the set's ``contours`` are read from the file when asked (it
         must stay open while they are used). None = everything in memory.
 

@@ -41,7 +41,7 @@ from engine.io.crs import (
     make_transformer,
     parse_crs,
 )
-from engine.io.scratch import ReadScratch, ScratchContours
+from engine.scratch import ReadScratch, ScratchContours
 from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
 from engine.types import BadFeature, Contour, ContourSet, Coords, FeatureId
 

@@ -34,7 +34,7 @@ from engine.serve.datasets import (
     build_lock,
     read_scratch,
 )
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 
 log = logging.getLogger("ccsm.build")
 

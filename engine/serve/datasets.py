@@ -25,14 +25,15 @@ from engine.ccsm.build import BuiltSet, SpooledSet, build_into
 from engine.ccsm.ccs import CCS
 from engine.ccsm.spool import surface_of
 from engine.io.dem import DEM_SUFFIXES
-from engine.io.scratch import ReadScratch
 from engine.io.source import read_source
 from engine.parallel import map_ordered
 from engine.params import BuildParams
+from engine.scratch import DiskSpool, ReadScratch
 from engine.serve.labels import label_placer
 from engine.serve.records import contour_rows, dataset_meta
-from engine.store.spool import DiskSpool
-from engine.store.sqlite import STORE_FORMAT, CCSStore, DatasetInfo, NewContour
+from engine.store.records import DatasetInfo, NewContour
+from engine.store.schema import STORE_FORMAT
+from engine.store.store import CCSStore
 from engine.types import Contour, ContourSet
 
 Progress = Callable[[int, int], None]

@@ -34,7 +34,8 @@ from engine.serve.renderer import (
     Renderer,
     TileOptions,
 )
-from engine.store.sqlite import CCSStore, DatasetInfo
+from engine.store.records import DatasetInfo
+from engine.store.store import CCSStore
 from engine.tiles.archives import ArchiveMeta, archive_format, open_archive, tile_id
 from engine.tiles.grid import Tile, mercator_to_lonlat, tiles_covering
 from engine.tiles.scale import zoom_for_scale

@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from engine.serve.pack import HeadColumns
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 
 #: Head memory of a renderer unless configured: the heads of about 450,000 contours with a ladder of 33 scales.
 DEFAULT_HEAD_CACHE_BYTES = 128 << 20

@@ -10,12 +10,11 @@ from __future__ import annotations
 
 from concurrent.futures import Executor
 
-import numpy as np
-
 from engine.cartography.dataset import dataset_cartography, label_sources
-from engine.cartography.labels import LabelAnchors, place_labels
+from engine.cartography.labels import place_labels
 from engine.intervals import infer_interval
-from engine.store.sqlite import CCSStore, LabelPlacer, StoredLabels
+from engine.store.records import LabelAnchors, LabelPlacer, StoredLabels
+from engine.store.store import CCSStore
 
 #: The largest tile zoom served unless configured otherwise; builds place labels for it.
 DEFAULT_MAX_ZOOM = 16
@@ -48,7 +47,7 @@ def place_dataset_labels(
     sources = (src for records in batches for src in label_sources(carto, records))
     last_zoom = label_last_zoom(max_zoom)
     anchors = place_labels(sources, info.ladder, carto.latitude, last_zoom, executor=executor)
-    return stored_labels(anchors, info.data_version, last_zoom)
+    return StoredLabels(info.data_version, last_zoom, anchors)
 
 
 def label_placer(
@@ -59,31 +58,6 @@ def label_placer(
     return lambda: place_dataset_labels(store, dataset, max_zoom, executor)
 
 
-def stored_labels(anchors: LabelAnchors, data_version: int, last_zoom: float) -> StoredLabels:
-    """Anchors as the store keeps them."""
-    return StoredLabels(
-        data_version=data_version,
-        last_zoom=last_zoom,
-        xy=anchors.xy,
-        angle=anchors.angle,
-        min_zoom=anchors.min_zoom,
-        fid=anchors.fid,
-        rank=anchors.rank,
-        elevation=anchors.elevation,
-        text=list(anchors.text),
-        box_px=anchors.box_px,
-    )
-
-
 def label_anchors(stored: StoredLabels) -> LabelAnchors:
     """Stored anchors as the renderer uses them."""
-    return LabelAnchors(
-        np.asarray(stored.xy, dtype=np.float64),
-        np.asarray(stored.angle, dtype=np.float64),
-        np.asarray(stored.min_zoom, dtype=np.float64),
-        np.asarray(stored.fid, dtype=np.int64),
-        np.asarray(stored.rank, dtype=np.int64),
-        np.asarray(stored.elevation, dtype=np.float64),
-        list(stored.text),
-        np.asarray(stored.box_px, dtype=np.float64),
-    )
+    return stored.anchors

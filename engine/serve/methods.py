@@ -24,7 +24,7 @@ from engine.geom.polyline import closed_path
 from engine.io.crs import WEB_MERCATOR, make_transformer
 from engine.serve.cache import LRUCache
 from engine.serve.pack import DatasetPack, LineSet
-from engine.store.sqlite import ContourRecord, DatasetInfo
+from engine.store.records import ContourRecord, DatasetInfo
 from engine.types import METHODS, Coords
 
 #: Baseline results are cached per 1/16 of a zoom level of scale: a 4 % step, invisible on screen.

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from engine.intervals import is_index
-from engine.store.sqlite import ContourRecord
+from engine.store.records import ContourRecord
 from engine.tiles.runs import CHUNK_ROWS, chunk_bounds_packed
 
 #: Bytes per stored vertex a dataset pack holds, about (to decide whether a dataset fits the contour memory).

@@ -1,7 +1,7 @@
 """A tile's pack of a dataset too large to hold in memory, read from the stored pieces of the contours' rows.
 
 Each contour's CCS rows and original rows are stored whole and also in pieces of
-:data:`~engine.store.sqlite.PIECE_ROWS` rows with their own boxes in an R*Tree per kind. A tile reads only the
+:data:`~engine.store.schema.PIECE_ROWS` rows with their own boxes in an R*Tree per kind. A tile reads only the
 pieces that meet the buffered tile, of the one kind its method draws, and joins each contour's pieces into one
 line. A piece starts on a chunk boundary of the whole line and ends on the next chunk's first row, so the joined
 line's chunks (their rows and boxes) are the whole line's chunks; where pieces were left out between two read
@@ -23,7 +23,9 @@ from numpy.typing import NDArray
 
 from engine.serve.heads import DatasetHeads, read_heads
 from engine.serve.pack import DatasetPack, LineSet
-from engine.store.sqlite import PIECE_KINDS, PIECE_ROWS, CCSStore, StoredPieces
+from engine.store.records import StoredPieces
+from engine.store.schema import PIECE_KINDS, PIECE_ROWS
+from engine.store.store import CCSStore
 from engine.tiles.runs import CHUNK_ROWS
 from engine.types import Bounds
 

@@ -22,7 +22,7 @@ from engine.ccsm.ccs import CCS
 from engine.errors import StoreError
 from engine.geom.polyline import closed_path
 from engine.io.crs import WEB_MERCATOR, make_transformer
-from engine.store.sqlite import NewContour, NewDataset
+from engine.store.records import NewContour, NewDataset
 from engine.tiles.significance import row_significance
 from engine.types import BadFeature, Contour
 

@@ -8,7 +8,7 @@ from pathlib import Path
 from engine.io.crs import crs_to_string
 from engine.io.dem import read_dem
 from engine.serve.datasets import RELIEF_DEM_KEY
-from engine.store.sqlite import DatasetInfo
+from engine.store.records import DatasetInfo
 from engine.tiles.hillshade import ShadedRelief, shade_relief
 
 

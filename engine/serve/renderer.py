@@ -22,7 +22,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from engine.cartography.dataset import DatasetCartography, dataset_cartography, label_columns
-from engine.cartography.labels import LabelAnchors
 from engine.ccsm.regression import t_at_scales
 from engine.checks import check_method, check_t
 from engine.intervals import infer_interval
@@ -33,7 +32,8 @@ from engine.serve.methods import Method, TileContext, TileLines, make_methods
 from engine.serve.pack import PACK_BYTES_PER_VERTEX, DatasetPack
 from engine.serve.pieces import pack_of_pieces
 from engine.serve.point_grid import PointGrid
-from engine.store.sqlite import CCSStore, ContourRecord, DatasetInfo
+from engine.store.records import ContourRecord, DatasetInfo, LabelAnchors
+from engine.store.store import CCSStore
 from engine.tiles.clip import clip_lines_exact, clip_lines_fast
 from engine.tiles.crossings import lines_cross_in_grid
 from engine.tiles.grid import Tile, buffered, check_fractional_zoom, check_tile, tile_bounds, tile_center_latitude

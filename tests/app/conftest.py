@@ -20,7 +20,7 @@ from fastapi.testclient import TestClient
 from app.main import create_app
 from app.settings import Settings
 from engine.serve.datasets import SourceSpec, build_dataset
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 
 REPO = Path(__file__).resolve().parents[2]
 #: Centre of the synthetic hills (near the bundled sample, Jacksboro TN), degrees.

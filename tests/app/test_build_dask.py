@@ -16,7 +16,7 @@ from conftest import REPO, free_port
 from synthetic_rasters import fractal_heights, write_geotiff
 
 from engine.serve.renderer import Renderer
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 from engine.tiles.grid import tiles_covering
 from engine.types import Bounds
 

@@ -19,7 +19,7 @@ from helpers import EXTENT, check_tile, decode, grid_to_lonlat, tile_for
 from typer.testing import CliRunner
 
 from app.cli import _register_commands, app
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 
 _register_commands()
 

@@ -234,7 +234,7 @@ def _older_format_store(path: Path) -> None:
     """A store file as an earlier ccsm, with another store format, left it."""
     import sqlite3
 
-    from engine.store.sqlite import CCSStore
+    from engine.store.store import CCSStore
 
     CCSStore(path).close()
     con = sqlite3.connect(path)
@@ -254,7 +254,8 @@ def _meta(path: Path) -> list[tuple[str, str]]:
 
 
 def test_simplify_replaces_a_default_cache_of_an_older_store_format(subset_path, tmp_path, monkeypatch) -> None:
-    from engine.store.sqlite import STORE_FORMAT, CCSStore
+    from engine.store.schema import STORE_FORMAT
+    from engine.store.store import CCSStore
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     cache = tmp_path / "cache" / "ccsm" / "sources.ccsm.sqlite"

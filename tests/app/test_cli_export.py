@@ -21,7 +21,7 @@ import engine.serve.export as export_mod
 from app.cli import _register_commands, app
 from engine.errors import InvalidParameter
 from engine.serve.renderer import Renderer
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 from engine.tiles.grid import tiles_covering
 from engine.types import Bounds
 

@@ -25,7 +25,7 @@ import psutil
 import pytest
 
 from engine.serve.datasets import SourceSpec, build_dataset
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 from tests.app.conftest import LAT0, LON0, LiveServer
 from tests.app.helpers import tile_for
 

@@ -23,7 +23,7 @@ import httpx
 import psutil
 import pytest
 
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 from tests.app.conftest import LAT0, LON0, LiveServer
 from tests.app.helpers import tile_for
 

@@ -16,7 +16,7 @@ from tests.warmup_probe import compiled_after_warm_up
 
 MORPH_TILES = """
 from engine.serve.renderer import Renderer
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 
 renderer = Renderer(CCSStore(sys.argv[1]))
 n = 0

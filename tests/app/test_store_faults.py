@@ -21,7 +21,7 @@ import httpx
 from fastapi.testclient import TestClient
 
 from app.main import create_app
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 from tests.app.conftest import REPO, LiveServer, make_settings, synthetic_features
 
 GEOJSON = {"content-type": "application/geo+json"}

@@ -12,7 +12,7 @@ import httpx
 import numpy as np
 import pytest
 
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 from tests.app.conftest import REPO, LiveServer, synthetic_features, write_geojson
 from tests.app.helpers import check_tile, tile_for
 
@@ -57,12 +57,13 @@ def test_sample_builds_on_first_start_and_restart_serves_from_store(tmp_path):
 #: then waits for the kill.
 KILLED_BUILD = """
 import os, signal, sys
-import engine.store.sqlite as sq
+import engine.store.store as sq
+from pathlib import Path
 from app.cli import main
 
 after = int(os.environ["KILL_AFTER_ROWS"])
-wal = sq.Path(os.environ["STORE"] + "-wal")
-real_save, real_row = sq.CCSStore.save, sq._contour_row
+wal = Path(os.environ["STORE"] + "-wal")
+real_save, real_row = sq.CCSStore.save, sq.contour_row
 seen = {"rows": 0, "wal_before": 0}
 
 def save(self, *a, **k):
@@ -77,7 +78,7 @@ def row(*a):
     seen["rows"] += 1
     return real_row(*a)
 
-sq.CCSStore.save, sq._contour_row = save, row
+sq.CCSStore.save, sq.contour_row = save, row
 sys.argv = ["ccsm", *sys.argv[1:]]
 main()
 """

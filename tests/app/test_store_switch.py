@@ -18,7 +18,7 @@ from conftest import LAT0, LON0, REPO, LiveServer
 from helpers import tile_for
 
 from engine.errors import StoreError
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 from engine.store.switch import StorePointer, publish
 
 #: Tiles around the synthetic hills at z12 to z14 (most hold contours) and one metadata path.

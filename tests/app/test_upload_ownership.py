@@ -15,7 +15,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.main import create_app
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 from tests.app.conftest import LiveServer, make_settings, synthetic_features
 
 GEOJSON = {"content-type": "application/geo+json"}

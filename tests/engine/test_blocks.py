@@ -152,7 +152,7 @@ def test_repair_by_small_blocks_makes_the_surfaces_of_the_repair_over_the_whole_
 def test_a_block_task_carries_whole_surfaces_as_stored_and_stretches_cut(tmp_path) -> None:
     from engine.ccsm.blocks import _block_tasks
     from engine.ccsm.spool import surface_of
-    from engine.store.spool import DiskSpool
+    from engine.scratch import DiskSpool
 
     surfaces = random_lines()
     spool = DiskSpool(tmp_path)
@@ -184,7 +184,7 @@ def test_block_tasks_are_the_same_whatever_the_near_cache_keeps(tmp_path, monkey
     read once."""
     from engine.ccsm.blocks import _block_tasks
     from engine.ccsm.spool import surface_of
-    from engine.store.spool import DiskSpool
+    from engine.scratch import DiskSpool
 
     surfaces = random_lines()
     spool = DiskSpool(tmp_path)
@@ -214,7 +214,7 @@ def test_a_near_cache_kept_across_checks_reads_what_was_replaced(tmp_path) -> No
     is read again (a re-check must see the rebuilt rows), the others are not, and its bytes stay counted."""
     from engine.ccsm.blocks import NearCache
     from engine.ccsm.spool import surface_of
-    from engine.store.spool import DiskSpool
+    from engine.scratch import DiskSpool
 
     surfaces = random_lines(20)
     spool = DiskSpool(tmp_path)

@@ -13,7 +13,7 @@ REPO = Path(__file__).resolve().parents[2]
 def test_importing_the_engine_does_not_import_fastapi_or_starlette() -> None:
     code = (
         "import json, sys\n"
-        "import engine, engine.ccsm.build, engine.ccsm.ccs, engine.io.source, engine.store.sqlite, "
+        "import engine, engine.ccsm.build, engine.ccsm.ccs, engine.io.source, engine.store.store, "
         "engine.serve.renderer, engine.tiles.mvt, engine.tiles.grid\n"
         "web = ('fastapi', 'starlette', 'uvicorn', 'pydantic_settings')\n"
         "print(json.dumps(sorted(m for m in sys.modules if m.split('.')[0] in web)))\n"

@@ -18,7 +18,8 @@ from engine.errors import InvalidParameter, StoreError, UnknownLayer
 from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.export import check_zoom_range, export_dataset, pyramid
 from engine.serve.renderer import Renderer
-from engine.store.sqlite import CCSStore, DatasetInfo
+from engine.store.records import DatasetInfo
+from engine.store.store import CCSStore
 from engine.tiles.grid import mercator_to_lonlat, tiles_covering
 from engine.types import Bounds
 

@@ -8,7 +8,7 @@ import pytest
 from engine.errors import StoreError, UnknownLayer
 from engine.io.source import read_source
 from engine.serve.datasets import SourceSpec, build_dataset, source_hash
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 from tests.app.conftest import synthetic_features, write_geojson
 
 

@@ -18,7 +18,8 @@ from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.heads import DatasetHeads
 from engine.serve.pack import HeadColumns
 from engine.serve.renderer import Renderer
-from engine.store.sqlite import STORE_FORMAT, CCSStore, pieces_sql
+from engine.store.schema import STORE_FORMAT
+from engine.store.store import CCSStore, pieces_sql
 from engine.tiles.grid import Tile, buffered, tile_bounds, tiles_covering
 from engine.tiles.significance import row_significance
 from engine.types import Bounds
@@ -55,16 +56,17 @@ def test_stored_labels_are_those_placed_from_the_stored_contours(sample_store: P
     store = CCSStore(sample_store, readonly=True)
     stored = store.labels("sample")
     assert stored is not None and stored.data_version == store.data_version("sample")
+    placed = stored.anchors
     expected = placed_by_hand(store, "sample", Renderer(store).options.max_zoom + 1.0)
     assert len(expected) > 100
-    assert np.array_equal(stored.fid, expected.fid)
-    assert np.array_equal(stored.xy, expected.xy)
-    assert np.array_equal(stored.angle, expected.angle)
-    assert np.array_equal(stored.min_zoom, expected.min_zoom)
-    assert np.array_equal(stored.rank, expected.rank)
-    assert np.array_equal(stored.elevation, expected.elevation)
-    assert np.array_equal(stored.box_px, expected.box_px)
-    assert stored.text == expected.text
+    assert np.array_equal(placed.fid, expected.fid)
+    assert np.array_equal(placed.xy, expected.xy)
+    assert np.array_equal(placed.angle, expected.angle)
+    assert np.array_equal(placed.min_zoom, expected.min_zoom)
+    assert np.array_equal(placed.rank, expected.rank)
+    assert np.array_equal(placed.elevation, expected.elevation)
+    assert np.array_equal(placed.box_px, expected.box_px)
+    assert placed.text == expected.text
 
 
 def count_placements(monkeypatch: pytest.MonkeyPatch) -> list[int]:
@@ -82,7 +84,7 @@ def count_placements(monkeypatch: pytest.MonkeyPatch) -> list[int]:
 def tile_with_labels(renderer: Renderer, store: CCSStore, dataset: str) -> tuple[int, int, int]:
     """A z14 tile of the dataset whose label layer is not empty."""
     labels = store.labels(dataset)
-    assert labels is not None and len(labels.fid)
+    assert labels is not None and len(labels.anchors)
     for z, x, y in tiles_covering(Bounds(*store.dataset(dataset).bounds_3857), 14):
         data = renderer.tile(dataset, z, x, y).data
         if data is not None and b"contour_labels" in data:

@@ -22,10 +22,9 @@ from engine.ccsm.spool import MemorySpool
 from engine.errors import StoreError
 from engine.parallel import local_pool, map_ordered
 from engine.params import BuildParams
-from engine.scratch import SCRATCH_PREFIX, host_name, remove_stale_scratch
+from engine.scratch import SCRATCH_PREFIX, DiskSpool, host_name, remove_stale_scratch
 from engine.serve.datasets import SourceSpec, build_dataset
-from engine.store.spool import DiskSpool
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 from tests.app.conftest import write_geojson
 from tests.engine.test_blocks import ring_clusters
 
@@ -160,10 +159,10 @@ def test_rows_and_label_candidates_made_on_an_executor_are_stored_as_made_in_the
     assert executor.ran.count("batch_rows") > 1 and executor.ran.count("batch_candidates") > 1, executor.ran
     assert stored_rows(pooled, "t") == stored_rows(here, "t")
     mine, theirs = here.labels("t"), pooled.labels("t")
-    assert mine is not None and theirs is not None and len(mine.fid) > 10
+    assert mine is not None and theirs is not None and len(mine.anchors) > 10
     for column in ("xy", "angle", "min_zoom", "fid", "rank", "elevation", "box_px"):
-        assert_array_equal(getattr(theirs, column), getattr(mine, column))
-    assert theirs.text == mine.text
+        assert_array_equal(getattr(theirs.anchors, column), getattr(mine.anchors, column))
+    assert theirs.anchors.text == mine.anchors.text
 
 
 def test_a_failing_build_removes_its_scratch_file_and_keeps_the_stored_version(

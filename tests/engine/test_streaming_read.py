@@ -14,11 +14,10 @@ from synthetic_rasters import fractal_heights, write_geotiff
 
 from engine.ccsm.blocks import PieceIndex
 from engine.ccsm.build import build_contour_set
-from engine.io.scratch import ReadScratch, ScratchContours
 from engine.io.source import read_source
 from engine.parallel import map_ordered
 from engine.params import BuildParams
-from engine.scratch import SCRATCH_PREFIX
+from engine.scratch import SCRATCH_PREFIX, ReadScratch, ScratchContours
 from engine.types import Contour, ContourSet, ContourSubset
 from tests.engine.test_blocks import ring_clusters
 

@@ -26,7 +26,7 @@ from engine.cartography.style import INDEX_LINE_WIDTH_PX, LINE_WIDTH_PX, RankFad
 from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import Renderer
 from engine.serve.simplify import simplify
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 from engine.tiles.scale import zoom_for_scale
 
 pytestmark = pytest.mark.slow

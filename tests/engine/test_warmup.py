@@ -35,7 +35,7 @@ from pathlib import Path
 from engine.io.sample import sample_contours_path
 from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import Renderer
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 from engine.tiles.grid import tiles_covering
 from engine.types import Bounds
 
