@@ -20,9 +20,9 @@ from rasterio.errors import RasterioError
 
 from engine.errors import InvalidParameter, SourceError
 from engine.intervals import UNIT_NAMES
+from engine.io.cleaning import LineParts, assemble_batches, in_batches
 from engine.io.crs import WGS84, parse_crs
 from engine.io.scratch import ReadScratch
-from engine.io.vector import LineParts, assemble_batches, in_batches
 from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
 from engine.types import BadFeature, ContourSet, FeatureId
 
@@ -93,7 +93,7 @@ def contours_from_dem(
     interval
         Contour interval in the DEM's vertical unit; levels are the multiples of it within the data's range.
     tolerances
-        Cleaning distances in metres (see :func:`engine.io.vector.assemble_contours`).
+        Cleaning distances in metres (see :func:`engine.io.cleaning.assemble_contours`).
     block
         GeoTIFF / ``.asc`` only: trace in windows of about this many cells a side, joined exactly at their
         edges (:mod:`engine.io.dem_windows`). None: windows of ``DEFAULT_BLOCK`` cells for a raster of more
