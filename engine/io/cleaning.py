@@ -9,7 +9,6 @@ source; every step is vectorised over a batch's vertices.
 from __future__ import annotations
 
 import math
-from collections import Counter
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, NoReturn
@@ -19,6 +18,7 @@ import pyproj
 from numpy.typing import NDArray
 
 from engine.errors import SourceError
+from engine.intervals import infer_interval
 from engine.io.crs import choose_working_crs, crs_to_string, lonlat_validity, make_transformer
 from engine.io.scratch import ReadScratch, ScratchContours
 from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
@@ -464,17 +464,3 @@ def _part_lengths(
     ring = closed[p]
     lengths[p[ring]] += np.hypot(*(xy[last[ring]] - xy[first[ring]]).T)
     return lengths
-
-
-def infer_interval(elevations: NDArray[np.float64]) -> float | None:
-    """The contour interval: the most common step between consecutive distinct elevations.
-
-    >>> infer_interval(np.array([100.0, 120.0, 140.0, 140.0, 200.0]))
-    20.0
-    """
-    levels = np.unique(np.round(np.asarray(elevations, dtype=np.float64), 6))
-    if len(levels) < 2:
-        return None
-    steps = np.round(np.diff(levels), 6)
-    step = float(Counter(steps.tolist()).most_common(1)[0][0])
-    return step if math.isfinite(step) else None
