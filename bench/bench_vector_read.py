@@ -4,7 +4,7 @@ batch of features at a time, through a scratch file as the build reads.
 The contour files are made once from the bench's fractal terrain (``bench_scale``, the ``grid`` series at 20 m)
 and written into var/bench-scale as a GeoPackage, a Shapefile and (``--formats``) a GeoJSON file. Each read
 runs in a process of its own (``--one``), so its peak RSS is its own; ``whole`` gathers every feature into one
-read before its lines are made (``engine.io.vector.READ_VERTICES`` unbounded), as reads were before batches;
+read before its lines are made (``engine.io.vector_reader.READ_VERTICES`` unbounded), as reads were before batches;
 ``batched`` is the read as it is (every format streamed in Arrow batches, reads of about
 ``ASSEMBLE_BATCH_VERTICES`` vertices).
 
@@ -63,7 +63,7 @@ def contour_files(size: int, formats: list[str]) -> list[Path]:
 
 def read_one(path: Path, mode: str) -> dict[str, float]:
     """Read ``path`` through a scratch file in this process; seconds, contours, RSS before and at the peak."""
-    import engine.io.vector as vector
+    import engine.io.vector_reader as vector
     from engine.io.source import read_source
     from engine.scratch import ReadScratch
 

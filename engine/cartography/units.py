@@ -6,7 +6,8 @@ import os
 from pathlib import Path
 
 from engine.io.dem import DEM_SUFFIXES, dem_vertical_units
-from engine.io.vector import VECTOR_SUFFIXES, elevation_units
+from engine.io.vector_reader import VECTOR_SUFFIXES
+from engine.io.vertical_units import elevation_units
 
 
 def source_units(path: str | os.PathLike[str], elevation_field: str | None = None) -> str | None:

@@ -9,9 +9,7 @@ from collections.abc import Iterator
 from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
-import contourpy
 import numpy as np
 import pyproj
 import rasterio
@@ -20,8 +18,10 @@ from rasterio.errors import RasterioError
 
 from engine.errors import InvalidParameter, SourceError
 from engine.intervals import UNIT_NAMES
+from engine.io.cleaning import LineParts, assemble_batches, in_batches
 from engine.io.crs import WGS84, parse_crs
-from engine.io.vector import LineParts, assemble_batches, in_batches
+from engine.io.dem_tracing import LevelLines, contour_levels, iter_levels
+from engine.io.dem_windows import contour_windows, window_side
 from engine.scratch import ReadScratch
 from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
 from engine.types import BadFeature, ContourSet, FeatureId
@@ -31,23 +31,14 @@ RASTER_SUFFIXES: tuple[str, ...] = (".tif", ".tiff", ".asc")
 NPZ_SUFFIXES: tuple[str, ...] = (".npz",)
 DEM_SUFFIXES: tuple[str, ...] = RASTER_SUFFIXES + NPZ_SUFFIXES
 
-#: Contours are traced this far (in the DEM's vertical unit, metres in practice) above their nominal level.
-#: DEMs with whole-metre heights put grid nodes exactly on multiples of the interval; tracing there makes
-#: repeated vertices and zero-length pieces (docs/design.md section 6). A millimetre is far below any DEM's
-#: accuracy.
-LEVEL_OFFSET = 1e-3
-
 #: A traced line whose every vertex lies within this many pixels of a grid node is not a contour but a
-#: by-product of :data:`LEVEL_OFFSET`: grid nodes *at* the level (a pit bottom or a flat ridge of whole-metre
-#: heights) make the true contour a point or a doubled segment, and tracing 1 mm higher wraps them in a ring a
-#: few millimetres wide. Such vertices sit LEVEL_OFFSET / (height step) pixels from the node: at most 0.001
-#: pixel for whole-metre heights; in the sample DEM the next line's farthest vertex is 0.077 pixel off a node.
-#: The same distance decides that an open line whose two ends nearly touch (at a node on the data's edge that
-#: is exactly at the level) is a ring.
+#: by-product of :data:`~engine.io.dem_tracing.LEVEL_OFFSET`: grid nodes *at* the level (a pit bottom or a
+#: flat ridge of whole-metre heights) make the true contour a point or a doubled segment, and tracing 1 mm
+#: higher wraps them in a ring a few millimetres wide. Such vertices sit LEVEL_OFFSET / (height step) pixels
+#: from the node: at most 0.001 pixel for whole-metre heights; in the sample DEM the next line's farthest
+#: vertex is 0.077 pixel off a node. The same distance decides that an open line whose two ends nearly touch
+#: (at a node on the data's edge that is exactly at the level) is a ring.
 NODE_SNAP_PX = 0.01
-
-#: More levels than this means the interval is wrong for the data (a 0.01 m interval on a mountain range).
-MAX_LEVELS = 5000
 
 #: Keys of the ``.npz`` layout (matplotlib's ``jacksboro_fault_dem.npz``).
 NPZ_KEYS: tuple[str, ...] = ("elevation", "xmin", "xmax", "ymin", "ymax", "dx", "dy")
@@ -93,11 +84,11 @@ def contours_from_dem(
     interval
         Contour interval in the DEM's vertical unit; levels are the multiples of it within the data's range.
     tolerances
-        Cleaning distances in metres (see :func:`engine.io.vector.assemble_contours`).
+        Cleaning distances in metres (see :func:`engine.io.cleaning.assemble_contours`).
     block
         GeoTIFF / ``.asc`` only: trace in windows of about this many cells a side, joined exactly at their
-        edges (:mod:`engine.io.dem_windows`). None: windows of ``DEFAULT_BLOCK`` cells for a raster of more
-        than ``WINDOWED_ABOVE_CELLS`` cells, else the whole grid at once.
+        edges (:mod:`engine.io.dem_windows`). None: as :func:`~engine.io.dem_windows.window_side` chooses by
+        the raster's size.
     executor
         Where the windows are traced (see :mod:`engine.parallel`); None = in this process.
     scratch
@@ -108,14 +99,15 @@ def contours_from_dem(
     -------
     ContourSet
         Contours in metres of the working CRS, ``elevation`` the nominal multiple of ``interval`` (lines are
-        traced :data:`LEVEL_OFFSET` above it), ids ``"{elevation}:{k}"`` with k counting the lines of that
-        level, closed rings (first == last from contourpy) stored without their repeated vertex,
+        traced :data:`~engine.io.dem_tracing.LEVEL_OFFSET` above it), ids ``"{elevation}:{k}"`` with k counting
+        the lines of that level, closed rings (first == last from contourpy) stored without their repeated vertex,
         ``interval`` set.
 
     Raises
     ------
     InvalidParameter
-        ``interval`` is not a positive number, or gives more than :data:`MAX_LEVELS` levels.
+        ``interval`` is not a positive number, or gives more than :data:`~engine.io.dem_tracing.MAX_LEVELS`
+        levels.
     SourceError
         The file is missing, unreadable, of an unknown format, has no CRS, or yields no contour.
     """
@@ -124,9 +116,6 @@ def contours_from_dem(
     path = Path(path)
     windowed = _windowed_block(path, block)
     if windowed is not None:
-        # Imported here: the windowed reader builds on this module's tracing functions.
-        from engine.io.dem_windows import contour_windows
-
         levels, header = contour_windows(path, float(interval), block=windowed, executor=executor, scratch=scratch)
         transform, crs = header.transform, parse_crs(header.crs_wkt, where=str(path))
     else:
@@ -148,14 +137,9 @@ def contours_from_dem(
 
 def _windowed_block(path: Path, block: int | None) -> int | None:
     """The window side to read ``path`` with, or None to read it whole (see :func:`contours_from_dem`)."""
-    from engine.io.dem_windows import DEFAULT_BLOCK, WINDOWED_ABOVE_CELLS, read_header
-
     if path.suffix.lower() not in RASTER_SUFFIXES or not path.exists():
         return None
-    if block is not None:
-        return block
-    header = read_header(path)
-    return DEFAULT_BLOCK if header.rows * header.cols > WINDOWED_ABOVE_CELLS else None
+    return window_side(path, block)
 
 
 def read_dem(path: str | os.PathLike[str]) -> DemGrid:
@@ -249,26 +233,6 @@ def _first_edge(v_first: float, v_last: float, step: float, n: int, axis: str, p
     )
 
 
-def contour_levels(zmin: float, zmax: float, interval: float) -> NDArray[np.float64]:
-    """Nominal levels: every multiple of ``interval`` within [zmin, zmax].
-
-    >>> contour_levels(236.0, 1076.0, 20.0)[[0, -1]].tolist()
-    [240.0, 1060.0]
-    """
-    first = math.ceil(zmin / interval)
-    last = math.floor(zmax / interval)
-    if last - first + 1 > MAX_LEVELS:
-        raise InvalidParameter(
-            f"interval {interval} gives {last - first + 1} levels over [{zmin}, {zmax}] (more than {MAX_LEVELS})"
-        )
-    # Rounding keeps 0.1 · 3 at 0.3, so elevations and ids read as the user typed the interval.
-    return np.round(np.arange(first, last + 1, dtype=np.float64) * interval, 9)
-
-
-#: Lines of one level in grid index space: (level, [(n, 2) points of each line]).
-LevelLines = tuple[float, list[NDArray[np.float64]]]
-
-
 def traced_levels(grid: DemGrid, interval: float, *, where: str) -> Iterator[LevelLines]:
     """The lines of a grid level by level, each level traced when it is read (levels without a line left out).
 
@@ -294,24 +258,6 @@ def _at_least_one(levels: Iterator[LevelLines], message: str) -> Iterator[LevelL
         yield level
     if empty:
         raise SourceError(message)
-
-
-def iter_levels(z: np.ma.MaskedArray, levels: NDArray[np.float64]) -> Iterator[LevelLines]:
-    """Lines of every level in grid index space (x = column, y = row of the pixel centre), each level traced
-    when it is read, levels without a line left out; a closed ring repeats its first vertex at the end, as
-    contourpy returns it."""
-    generator = contourpy.contour_generator(
-        z=z, name="serial", line_type=contourpy.LineType.ChunkCombinedOffset, chunk_size=0
-    )
-    for level in levels.tolist():
-        # ChunkCombinedOffset with one chunk: ([points (n, 2)] or [None], [offsets (m + 1,)] or [None]).
-        lines: Any = generator.lines(level + LEVEL_OFFSET)
-        points, offsets = lines
-        if not points or points[0] is None:
-            continue
-        pts = np.asarray(points[0], dtype=np.float64)
-        off = np.asarray(offsets[0], dtype=np.int64)
-        yield level, np.split(pts, off[1:-1])
 
 
 def line_parts_from_traced(

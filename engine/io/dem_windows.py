@@ -30,7 +30,7 @@ from rasterio.windows import Window
 from scipy.spatial import cKDTree
 
 from engine.errors import InvalidParameter, SourceError
-from engine.io.dem import LevelLines, contour_levels, iter_levels
+from engine.io.dem_tracing import LevelLines, contour_levels, iter_levels
 from engine.parallel import map_ordered
 from engine.scratch import ReadScratch
 
@@ -80,6 +80,15 @@ def read_header(path: Path) -> RasterHeader:
             )
     except RasterioError as exc:
         raise SourceError(f"{path}: cannot read DEM ({exc})") from exc
+
+
+def window_side(path: Path, block: int | None) -> int | None:
+    """The window side to trace the raster ``path`` with: ``block`` when given, else :data:`DEFAULT_BLOCK` for a
+    raster of more than :data:`WINDOWED_ABOVE_CELLS` cells, or None to trace a smaller one whole."""
+    if block is not None:
+        return block
+    header = read_header(path)
+    return DEFAULT_BLOCK if header.rows * header.cols > WINDOWED_ABOVE_CELLS else None
 
 
 def window_starts(n: int, block: int) -> list[int]:
@@ -179,13 +188,13 @@ def contour_windows(
     Returns
     -------
     (levels, header)
-        Each level's lines in whole-grid index space as :func:`engine.io.dem.iter_levels` gives them, and
+        Each level's lines in whole-grid index space as :func:`engine.io.dem_tracing.iter_levels` gives them, and
         the grid's header (its geotransform and CRS).
 
     Raises
     ------
     InvalidParameter
-        ``block`` is below 1, or the interval gives more than :data:`~engine.io.dem.MAX_LEVELS` levels.
+        ``block`` is below 1, or the interval gives more than :data:`~engine.io.dem_tracing.MAX_LEVELS` levels.
     SourceError
         Unreadable file, no CRS, no valid height or no contour.
     """

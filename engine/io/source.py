@@ -14,8 +14,9 @@ from pathlib import Path
 from engine.errors import InvalidParameter, SourceError
 from engine.io.crs import choose_working_crs, make_transformer
 from engine.io.dem import DEM_SUFFIXES, contours_from_dem
+from engine.io.geojson_writer import write_geojson
 from engine.io.sample import sample_contours_path, sample_dem_path
-from engine.io.vector import VECTOR_SUFFIXES, read_contours, write_geojson
+from engine.io.vector_reader import VECTOR_SUFFIXES, read_contours
 from engine.scratch import ReadScratch
 from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
 from engine.types import ContourSet
@@ -56,7 +57,7 @@ def read_source(
         ``.tif`` / ``.tiff`` / ``.asc`` / ``.npz``: a DEM, contoured at every multiple of ``interval``.
     elevation_field
         Contour files only: the elevation attribute (found by name when None, see
-        :func:`engine.io.vector.read_contours`).
+        :func:`engine.io.vector_reader.read_contours`).
     layer
         Contour files only: layer of a multi-layer file.
     interval

@@ -6,7 +6,7 @@ import rasterio
 from affine import Affine
 
 from engine.cartography.units import source_units
-from engine.io.vector import units_from_field_name
+from engine.io.vertical_units import units_from_field_name
 
 
 @pytest.mark.parametrize(

@@ -12,7 +12,8 @@ from synthetic_rasters import write_geotiff
 
 from engine.errors import InvalidParameter, SourceError
 from engine.io.crs import make_transformer
-from engine.io.dem import LEVEL_OFFSET, contour_levels, read_dem
+from engine.io.dem import read_dem
+from engine.io.dem_tracing import LEVEL_OFFSET, contour_levels
 from engine.io.source import contours_from_dem, read_source
 
 DATA = Path(__file__).resolve().parents[1] / "data"

@@ -20,8 +20,9 @@ from pyogrio.raw import write as ogr_write
 
 from engine.errors import InvalidContour, SourceError
 from engine.intervals import infer_interval
+from engine.io.cleaning import dedup_mask
 from engine.io.source import read_contours, read_source, write_geojson
-from engine.io.vector import ELEVATION_FIELDS, dedup_mask
+from engine.io.vector_reader import ELEVATION_FIELDS
 from engine.tolerances import Tolerances
 from engine.types import BadFeature, ContourSet
 
@@ -543,7 +544,7 @@ def test_issue_12_a_source_assembled_in_small_batches_gives_the_contours_and_rea
 ) -> None:
     """Parts are checked and projected in batches so a big source's temporaries stay small; the result must not
     depend on the batch size (the working CRS comes from every batch's extent, reasons keep their order)."""
-    import engine.io.vector as vector
+    import engine.io.cleaning as cleaning
     from engine.io.source import sample_contours_path
 
     sample = json.loads(sample_contours_path().read_text())
@@ -554,7 +555,7 @@ def test_issue_12_a_source_assembled_in_small_batches_gives_the_contours_and_rea
     path = tmp_path / "mixed.geojson"
     path.write_text(json.dumps({"type": "FeatureCollection", "features": features}))
     whole = read_source(path)
-    monkeypatch.setattr(vector, "ASSEMBLE_BATCH_VERTICES", 50)
+    monkeypatch.setattr(cleaning, "ASSEMBLE_BATCH_VERTICES", 50)
     batched = read_source(path)
     assert len(whole.bad_features) >= 3
     assert [(b.id, b.reason) for b in batched.bad_features] == [(b.id, b.reason) for b in whole.bad_features]
@@ -579,7 +580,8 @@ def test_issue_12_a_file_read_in_batches_gives_the_contour_set_of_one_read(
 ) -> None:
     """Every format is streamed a few features at a time; the contours, their ids (FIDs, parts) and the bad
     features with their reasons and order must be those of one read of every feature."""
-    import engine.io.vector as vector
+    import engine.io.cleaning as cleaning
+    import engine.io.vector_reader as vector
 
     geoms, elevations = sample_lines(240)
     geoms[150] = shapely.LineString([(-84.1, 36.5), (190.0, 36.5)])  # a Shapefile cannot hold NaN
@@ -608,7 +610,7 @@ def test_issue_12_a_file_read_in_batches_gives_the_contour_set_of_one_read(
     reads.clear()
     monkeypatch.setattr(vector, "READ_VERTICES", None)
     monkeypatch.setattr(vector, "ARROW_BATCH_FEATURES", 16)
-    monkeypatch.setattr(vector, "ASSEMBLE_BATCH_VERTICES", 1500)
+    monkeypatch.setattr(cleaning, "ASSEMBLE_BATCH_VERTICES", 1500)
     batched = read_source(path)
 
     assert len(reads) > 5 and sum(reads) == 240, reads  # the bad features are in later reads

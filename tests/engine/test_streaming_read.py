@@ -197,7 +197,8 @@ def test_issue_12_a_contour_file_read_in_batches_never_holds_its_lines_whole(tmp
     import shapely
     from pyogrio.raw import write
 
-    import engine.io.vector as vector
+    import engine.io.cleaning as cleaning
+    import engine.io.vector_reader as vector
 
     rng = np.random.default_rng(7)
     n, k = 2000, 100  # lines of k vertices, wandering east of (WEST, NORTH)
@@ -206,7 +207,7 @@ def test_issue_12_a_contour_file_read_in_batches_never_holds_its_lines_whole(tmp
     wkb = np.asarray(shapely.to_wkb(shapely.linestrings(starts + steps)), dtype=object)
     path = tmp_path / f"lines{suffix}"
     write(path, wkb, [np.full(n, 100.0)], ["ele"], crs="EPSG:32616", geometry_type="LineString")
-    monkeypatch.setattr(vector, "ASSEMBLE_BATCH_VERTICES", 10_000)
+    monkeypatch.setattr(cleaning, "ASSEMBLE_BATCH_VERTICES", 10_000)
     monkeypatch.setattr(vector, "ARROW_BATCH_FEATURES", 16)  # GDAL's batches as small against the file
 
     def peak() -> int:
