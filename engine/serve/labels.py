@@ -72,6 +72,7 @@ def stored_labels(anchors: LabelAnchors, data_version: int, last_zoom: float) ->
         elevation=anchors.elevation,
         text=list(anchors.text),
         box_px=anchors.box_px,
+        issues=tuple(anchors.issues),
     )
 
 

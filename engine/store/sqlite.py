@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 from engine.errors import BuildCancelled, StoreError, StoreFormatError, StoreUnwritable, UnknownLayer
 from engine.scratch import host_name, pid_alive
+from engine.store.issues import ISSUES_SCHEMA, delete_issues, insert_issues, read_issues
 from engine.types import Coords
 
 #: Bumped whenever the layout of the file changes; a store of another format is refused.
@@ -291,6 +292,8 @@ class NewContour:
     sig_top: NDArray[np.float32]
     sig_original: NDArray[np.float32]
     box: tuple[float, float, float, float]
+    #: (step, reason) of each per-contour step the build could not finish (the contour is served without it).
+    issues: tuple[tuple[str, str], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -312,6 +315,8 @@ class StoredLabels:
     elevation: NDArray[np.float64]
     text: list[str]
     box_px: NDArray[np.float64]
+    #: (fid, reason) of each contour whose label could not be placed (it is served without one).
+    issues: tuple[tuple[int, str], ...] = ()
 
 
 #: Places a dataset's labels once its rows and metadata are written: called inside the write transaction on
@@ -490,7 +495,7 @@ class CCSStore:
         try:
             con = self._con()
             if not readonly:
-                con.executescript(_SCHEMA)
+                con.executescript(_SCHEMA + ISSUES_SCHEMA)
                 row = con.execute("SELECT value FROM store_meta WHERE key='format'").fetchone()
                 if row is None:
                     con.execute("INSERT OR IGNORE INTO store_meta VALUES ('format', ?)", (str(STORE_FORMAT),))
@@ -664,6 +669,8 @@ class CCSStore:
                 )
                 fid = cur.lastrowid
                 cur.execute("INSERT INTO contour_rtree VALUES (?,?,?,?,?,?)", (fid, *c.box, dataset))
+                if c.issues:
+                    insert_issues(cur, dataset, int(fid or 0), c.issues)
                 for kind, k, blobs, box in _pieces(c):
                     marks = ",".join("?" * len(blobs))
                     cur.execute(f"INSERT INTO {kind}_pieces VALUES (NULL,?,?,{marks})", (fid, k, *blobs))
@@ -700,7 +707,10 @@ class CCSStore:
                 ),
             )
             if labels is not None:
-                self._insert_labels(cur, dataset, counter, labels())
+                placed = labels()
+                self._insert_labels(cur, dataset, counter, placed)
+                for fid, reason in placed.issues:
+                    insert_issues(cur, dataset, fid, [("labels", reason)])
             cur.execute("DELETE FROM builds WHERE dataset=?", (dataset,))
         return self.dataset(dataset)
 
@@ -743,6 +753,11 @@ class CCSStore:
             box_px=_array(row[9], 2),
         )
 
+    def contour_issues(self, dataset: str) -> tuple[list[dict[str, Any]], int]:
+        """The dataset's contours served without part of their build (``fid``, ``id``, ``step``, ``reason``;
+        the first :data:`engine.store.issues.REPORTED_ISSUES`) and how many there are."""
+        return read_issues(self._con(), dataset)
+
     @staticmethod
     def _delete_rows(cur: sqlite3.Cursor, dataset: str) -> None:
         cur.execute(
@@ -754,6 +769,7 @@ class CCSStore:
             cur.execute(f"DELETE FROM {kind}_pieces WHERE piece IN ({pieces})", (dataset,))
         cur.execute("DELETE FROM contours WHERE dataset=?", (dataset,))
         cur.execute("DELETE FROM labels WHERE dataset=?", (dataset,))
+        delete_issues(cur, dataset)
         cur.execute("DELETE FROM datasets WHERE id=?", (dataset,))
 
     def delete(self, dataset: str) -> bool:
