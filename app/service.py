@@ -188,6 +188,8 @@ class DatasetService:
     def start_builds(self) -> None:
         """Queue a build of every configured source that is missing or changed."""
         for spec in self.specs:
+            if self._is_current(spec):
+                self._log_contour_issues(spec.dataset)
             if self._is_current(spec) or not spec.path.exists():
                 continue
             self.store.set_build_status(spec.dataset, "building", 0, 0)
@@ -216,8 +218,20 @@ class DatasetService:
                 log.error("building %s: %s", log_safe(job.dataset), why)
         else:
             self.renderer.forget(job.dataset)
+            self._log_contour_issues(job.dataset)
         if job.kind == "upload":
             Path(job.source_path).unlink(missing_ok=True)
+
+    def _log_contour_issues(self, dataset: str) -> None:
+        """Tell the service log which contours of a built dataset are served without part of their build."""
+        issues, total = self.store.contour_issues(dataset)
+        if total:
+            shown = "; ".join(f"fid {i['fid']} ({i['id']}) {i['step']}: {i['reason']}" for i in issues[:5])
+            more = f"; and {total - 5} more (GET /datasets/{dataset})" if total > 5 else ""
+            log.warning(
+                "dataset %s: %d contour(s) served without part of their build: %s%s",
+                log_safe(dataset), total, log_safe(shown), more,
+            )
 
     def wait_for_builds(self, timeout: float | None = None) -> None:
         """Block until the builds started or queued so far are done (tests, CLI)."""
@@ -387,6 +401,8 @@ class DatasetService:
             return out
         info, interval = self.renderer.info(dataset)
         out.update(describe(info, interval, self.settings))
+        # Contours served without part of their build (no label, input geometry), each with its reason.
+        out["contour_issues"], out["counts"]["contour_issues"] = self.store.contour_issues(dataset)
         return out
 
     def delete(self, dataset: str) -> None:

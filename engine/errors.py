@@ -49,3 +49,13 @@ class StoreUnwritable(StoreError):
 
 class BuildCancelled(CCSMError):
     """A build's dataset was deleted while it built: nothing is written."""
+
+
+class NothingToServe(CCSMError):
+    """No contour of a source could be built: the message names a contour, the step that failed and why."""
+
+
+def short_reason(exc: BaseException) -> str:
+    """One line for a user: the exception's type and the start of its message (the traceback goes to a log)."""
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}"[:300] if text else type(exc).__name__

@@ -113,6 +113,20 @@ class BadFeature:
     where: str = ""
 
 
+@dataclass(frozen=True)
+class ContourIssue:
+    """A per-contour step of the build that could not finish: the contour is served without that part.
+
+    ``step`` names the part ("surface": served as its input geometry, "repair": kept at its last target,
+    "labels": no label); ``fid`` is the stored row's id once known.
+    """
+
+    contour_id: FeatureId
+    step: str
+    reason: str
+    fid: int | None = None
+
+
 @dataclass
 class ContourSet:
     """Contours read from one source, in a metric working CRS, with the CRS facts needed to write them back.

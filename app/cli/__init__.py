@@ -1,6 +1,7 @@
 """The ``ccsm`` command line: one typer app, one module per command group.
 
-Exit status: 0 on success, 2 on bad input (unreadable file, unknown CRS, bad option), 1 on an internal error.
+Exit status: 0 on success, 2 on bad input (unreadable file, unknown CRS, bad option, no contour that can be
+built), 1 on an internal error (one line on stderr names the log file with its traceback: app/cli/crash_log.py).
 """
 
 from __future__ import annotations
@@ -29,5 +30,8 @@ def _register_commands() -> None:
 
 def main() -> None:
     """Entry point of the ``ccsm`` console script."""
+    from app.cli.crash_log import internal_errors_exit
+
     _register_commands()
-    app()
+    with internal_errors_exit():
+        app()

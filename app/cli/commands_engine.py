@@ -22,6 +22,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from app.cli import app
+from app.cli.contour_issues import issues_phrase, report_contour_issues
 from engine.errors import CCSMError
 from engine.types import BadFeature
 
@@ -246,11 +247,12 @@ def simplify(
     n_in = info.n_contours + len(bad)
     if bad:
         err_console.print(_bad_feature_table(bad))
+    issues = report_contour_issues(err_console, cache, info.id)
     console.print(
         f"{out}: {len(result.contours)} contours at 1:{scale:,.0f} ({method}, CRS {to_crs}); "
         f"{result.vanished} too small to show at this scale (left out); "
         f"{result.dropped} dropped (their level is not drawn at this scale); {len(bad)} bad feature(s); "
-        f"{n_in} input feature(s); {time.perf_counter() - started:.1f} s",
+        f"{n_in} input feature(s); {issues_phrase(issues)}; {time.perf_counter() - started:.1f} s",
         highlight=False,
         soft_wrap=True,
     )

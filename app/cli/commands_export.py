@@ -41,6 +41,7 @@ from app.cli.commands_engine import (
     err_console,
     fail,
 )
+from app.cli.contour_issues import issues_phrase, report_contour_issues
 
 
 def _progress() -> Progress:
@@ -172,9 +173,13 @@ def export(
                 workers=workers,
                 progress=lambda d, t: progress.update(task, completed=d, total=t),
             )
+    from engine.store.sqlite import CCSStore
+
+    issues = report_contour_issues(err_console, CCSStore(store_path, readonly=True), dataset_id)
     console.print(
         f"{out}: {result.tiles} tiles ({result.format}, gzip MVT, z{minzoom}-{maxzoom}; {result.empty} empty left "
-        f"out), {result.bytes / 1e6:.2f} MB; tiles {result.seconds:.1f} s, total {time.perf_counter() - started:.1f} s",
+        f"out), {result.bytes / 1e6:.2f} MB; {issues_phrase(issues)}; tiles {result.seconds:.1f} s, "
+        f"total {time.perf_counter() - started:.1f} s",
         highlight=False,
         soft_wrap=True,
     )

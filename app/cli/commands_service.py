@@ -206,9 +206,12 @@ def build(
         console.print(f"[red]error:[/red] {exc}")
         raise typer.Exit(2) from None
     verb = "built" if rebuilt else "already current:"
+    from app.cli.contour_issues import issues_phrase, report_contour_issues
+
+    issues = report_contour_issues(console, ccs_store, info.id)
     console.print(
         f"{verb} {info.id} -> {store_path} ({info.n_contours} contours, {info.n_vertices} vertices, "
-        f"data_version {info.data_version}, {len(info.bad_features)} bad features)"
+        f"data_version {info.data_version}, {len(info.bad_features)} bad features, {issues_phrase(issues)})"
     )
     if publish is not None:
         publish_store(ccs_store, publish)

@@ -12,6 +12,7 @@ kept only if its screen box does not meet a kept one at the zoom both are first 
 
 from __future__ import annotations
 
+import logging
 import math
 from collections import deque
 from collections.abc import Iterable, Iterator, Sequence
@@ -23,9 +24,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from engine.ccsm.regression import t_at_scales
+from engine.errors import short_reason
 from engine.parallel import map_ordered
 from engine.store.records import LabelAnchors
 from engine.tiles.scale import EARTH_RADIUS_M, TILE_SIZE_PX, scale_for_zoom, zoom_for_scale
+
+log = logging.getLogger("ccsm.labels")
 
 #: EPSG:3857 metres per pixel at zoom 0 (512 px tiles).
 MERCATOR_M_PER_PX_Z0 = 2 * math.pi * EARTH_RADIUS_M / TILE_SIZE_PX
@@ -116,6 +120,8 @@ def contour_candidates(
     if len(base) < 3:
         return empty
     zooms, ts = _t_through_zooms(src, ladder, latitude, max_zoom, style.zoom_step)
+    if len(zooms) == 0:  # first shown past the last zoom (a ring too small to draw before): never labelled
+        return empty
     mpp = metres_per_px(zooms)
     label_px = style.char_px * len(src.text) + 2 * style.padding_px
     drift = np.hypot(*(top - base).T) * float(np.max(ts / mpp))
@@ -211,6 +217,8 @@ def _keep_apart(
 
 #: (k, 2) points, (k,) angles, (k,) straightness and (k,) first zooms: one contour's candidate anchors.
 Candidates = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+#: No candidates: what a contour whose candidates could not be found gets.
+NO_CANDIDATES: Candidates = (np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0))
 
 #: Contours whose candidates one task finds while a dataset's labels are placed on an executor.
 CANDIDATE_BATCH = 64
@@ -218,10 +226,22 @@ CANDIDATE_BATCH = 64
 
 def batch_candidates(
     sources: Sequence[LabelSource], ladder: NDArray[np.float64], latitude: float, max_zoom: float, style: LabelStyle
-) -> list[Candidates]:
+) -> list[Candidates | str]:
     """:func:`contour_candidates` of each source: a task a worker runs (each contour's candidates are its own,
-    so finding them is the part of the placement that can be shared out)."""
-    return [contour_candidates(src, ladder, latitude, max_zoom, style) for src in sources]
+    so finding them is the part of the placement that can be shared out).
+
+    A contour whose candidates cannot be found gets none, and the reason in their place (a string): one
+    contour left without a label, not a dataset without labels.
+    """
+    out: list[Candidates | str] = []
+    for src in sources:
+        try:
+            out.append(contour_candidates(src, ladder, latitude, max_zoom, style))
+        except Exception as exc:  # the per-contour boundary: this contour only goes unlabelled
+            log.warning("contour fid %s is left without a label: %s", src.fid, short_reason(exc))
+            log.debug("label candidates of contour fid %s", src.fid, exc_info=True)
+            out.append(short_reason(exc))
+    return out
 
 
 def place_labels(
@@ -252,6 +272,7 @@ def place_labels(
     style = style or LabelStyle()
     pts, ang, score, zoom, owner = [], [], [], [], []
     fids, elevations, ranks, labels = [], [], [], []  # of each source
+    issues: list[tuple[int, str]] = []
     sent: deque[list[LabelSource]] = deque()  # the batches whose candidates are being found, in order
 
     def tasks() -> Iterator[tuple[object, ...]]:
@@ -265,7 +286,11 @@ def place_labels(
         for batch_found in map_ordered(executor, batch_candidates, tasks())
         for src, cands in zip(sent.popleft(), batch_found, strict=True)
     )
-    for k, (src, (p, a, sc, fz)) in enumerate(found):
+    for k, (src, cands) in enumerate(found):
+        if isinstance(cands, str):
+            issues.append((src.fid, cands))
+            cands = NO_CANDIDATES
+        p, a, sc, fz = cands
         pts.append(p)
         ang.append(a)
         score.append(sc)
@@ -278,7 +303,8 @@ def place_labels(
     if not sum(len(o) for o in owner):
         z = np.zeros(0)
         return LabelAnchors(
-            np.zeros((0, 2)), z, z, np.zeros(0, np.int64), np.zeros(0, np.int64), z, [], np.zeros((0, 2))
+            np.zeros((0, 2)), z, z, np.zeros(0, np.int64), np.zeros(0, np.int64), z, [], np.zeros((0, 2)),
+            tuple(issues),
         )
     xy, angle, straight, own = np.concatenate(pts), np.concatenate(ang), np.concatenate(score), np.concatenate(owner)
     first = np.concatenate(zoom)
@@ -298,6 +324,7 @@ def place_labels(
         np.array(elevations, dtype=np.float64)[own[placed]],
         [texts[i] for i in placed.tolist()],
         boxes[placed],
+        tuple(issues),
     )
 
 

@@ -17,7 +17,8 @@ from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
 from engine.ccsm.blocks import NearCache, PieceIndex, find_crossings_by_block, input_touches, surface_boxes
-from engine.ccsm.ccs import CCS, build_ccs, check_contour, slice_area
+from engine.ccsm.ccs import CCS, check_contour, slice_area
+from engine.ccsm.contour_issues import build_or_keep_input, nothing_to_serve
 from engine.ccsm.regression import ScaleModel, fit_scale_model
 from engine.ccsm.spool import MemorySpool, Spool
 from engine.errors import CCSMError
@@ -107,15 +108,7 @@ def _build_chunk(
     out: list[CCS | BadFeature] = []
     factors = factors if factors is not None else [1.0] * len(contours)
     for contour, group, factor in zip(contours, labels, factors, strict=True):
-        try:
-            ccs = build_ccs(contour, params, factor)
-        except CCSMError as exc:
-            out.append(BadFeature(contour.id, str(exc)))
-            continue
-        ccs.group = int(group)
-        ccs.t_at_scale = model.t_table(ccs.group, ccs.sim_t, ccs.sim)
-        ccs.vanish_scale = vanish_scale(ccs, model)
-        out.append(ccs)
+        out.append(build_or_keep_input(contour, int(group), params, model, factor))
     return out
 
 
@@ -266,6 +259,8 @@ def build_into(
                 repaired = resolve_crossings(
                     spool, np.concatenate(boxes), pieces, inputs, labels[built].tolist(), params, model, pool
                 )
+    if not built and total:
+        raise nothing_to_serve(rejected + failed, total)
     return SpooledSet(
         spool=spool,
         inputs=inputs,

@@ -72,6 +72,9 @@ class CCS:
     t_at_scale: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     vanish_scale: float = float("inf")
     tolerance_factor: float = 1.0
+    #: (step, reason) of each step of its build that could not finish (docs/design.md, "A failure stays with its
+    #: contour"): the surface is then what that step falls back to.
+    issues: tuple[tuple[str, str], ...] = ()
 
     def at(self, t: float) -> Coords:
         """The simplified contour at ``t`` in [0, 1]: (M, 2) metres (a ring as a closed path)."""

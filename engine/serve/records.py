@@ -74,6 +74,7 @@ def contour_rows(surfaces: Sequence[CCS], working_crs: str, contours: Sequence[C
                 sig_top=row_significance(top),
                 sig_original=row_significance(original),
                 box=(float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])),
+                issues=tuple(ccs.issues),
             )
         )
     return rows

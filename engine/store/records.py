@@ -151,6 +151,8 @@ class NewContour:
     sig_top: NDArray[np.float32]
     sig_original: NDArray[np.float32]
     box: tuple[float, float, float, float]
+    #: (step, reason) of each per-contour step the build could not finish (the contour is served without it).
+    issues: tuple[tuple[str, str], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -183,6 +185,9 @@ class LabelAnchors:
     elevation: NDArray[np.float64]
     text: list[str]
     box_px: NDArray[np.float64]
+    #: (fid, reason) of each contour whose candidates could not be found: it is left without a label (not stored
+    #: with the anchors: the build report keeps it, engine/store/issues.py).
+    issues: tuple[tuple[int, str], ...] = ()
 
     def __len__(self) -> int:
         return len(self.fid)

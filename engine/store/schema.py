@@ -110,5 +110,13 @@ CREATE TABLE IF NOT EXISTS builds(
     started REAL NOT NULL,
     updated REAL NOT NULL
 );
+-- The contours served without part of their build, and why (engine/store/issues.py).
+CREATE TABLE IF NOT EXISTS contour_issues(
+    dataset TEXT NOT NULL,
+    fid INTEGER NOT NULL,
+    step TEXT NOT NULL,
+    reason TEXT NOT NULL
+);
+CREATE INDEX IF NOT EXISTS contour_issues_dataset ON contour_issues(dataset);
 """
 

@@ -20,6 +20,7 @@ import sqlite3
 import time
 from collections.abc import Callable, Iterable, Sequence
 from itertools import chain
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -42,6 +43,7 @@ from engine.store.codec import (
     stored_labels,
     vanish_value,
 )
+from engine.store.issues import delete_issues, insert_issues, read_issues
 from engine.store.records import (
     ContourHead,
     ContourRecord,
@@ -158,6 +160,8 @@ class CCSStore(BuildBook):
                 )
                 fid = cur.lastrowid
                 cur.execute("INSERT INTO contour_rtree VALUES (?,?,?,?,?,?)", (fid, *c.box, dataset))
+                if c.issues:
+                    insert_issues(cur, dataset, int(fid or 0), c.issues)
                 for kind, k, blobs, box in contour_pieces(c):
                     marks = ",".join("?" * len(blobs))
                     cur.execute(f"INSERT INTO {kind}_pieces VALUES (NULL,?,?,{marks})", (fid, k, *blobs))
@@ -174,8 +178,10 @@ class CCSStore(BuildBook):
                 dataset_row(dataset, meta, counter, time.time(), counts),
             )
             if labels is not None:
-                placed = label_row(dataset, counter, labels())
-                cur.execute("INSERT INTO labels VALUES (?,?,?,?,?,?,?,?,?,?,?,?)", placed)
+                placed = labels()
+                cur.execute("INSERT INTO labels VALUES (?,?,?,?,?,?,?,?,?,?,?,?)", label_row(dataset, counter, placed))
+                for label_fid, reason in placed.anchors.issues:
+                    insert_issues(cur, dataset, label_fid, [("labels", reason)])
             forget_build(cur, dataset)
         return self.dataset(dataset)
 
@@ -183,6 +189,11 @@ class CCSStore(BuildBook):
         """The label anchors stored with the dataset's current version, or None (none were placed at build)."""
         row = self._con().execute(f"SELECT {LABEL_COLUMNS} FROM labels WHERE dataset=?", (dataset,)).fetchone()
         return None if row is None else stored_labels(row)
+
+    def contour_issues(self, dataset: str) -> tuple[list[dict[str, Any]], int]:
+        """The dataset's contours served without part of their build (``fid``, ``id``, ``step``, ``reason``;
+        the first :data:`engine.store.issues.REPORTED_ISSUES`) and how many there are."""
+        return read_issues(self._con(), dataset)
 
     @staticmethod
     def _delete_rows(cur: sqlite3.Cursor, dataset: str) -> None:
@@ -195,6 +206,7 @@ class CCSStore(BuildBook):
             cur.execute(f"DELETE FROM {kind}_pieces WHERE piece IN ({pieces})", (dataset,))
         cur.execute("DELETE FROM contours WHERE dataset=?", (dataset,))
         cur.execute("DELETE FROM labels WHERE dataset=?", (dataset,))
+        delete_issues(cur, dataset)
         cur.execute("DELETE FROM datasets WHERE id=?", (dataset,))
 
     def delete(self, dataset: str) -> bool:
