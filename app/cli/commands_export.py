@@ -173,7 +173,7 @@ def export(
                 workers=workers,
                 progress=lambda d, t: progress.update(task, completed=d, total=t),
             )
-    from engine.store.sqlite import CCSStore
+    from engine.store.store import CCSStore
 
     issues = report_contour_issues(err_console, CCSStore(store_path, readonly=True), dataset_id)
     console.print(

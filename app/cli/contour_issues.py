@@ -8,7 +8,7 @@ from rich.console import Console
 from rich.table import Table
 
 if TYPE_CHECKING:
-    from engine.store.sqlite import CCSStore
+    from engine.store.store import CCSStore
 
 #: Issues the console table shows at most (the count is always given in full).
 SHOWN = 50

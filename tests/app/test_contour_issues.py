@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import LAT0, LON0, REPO, make_settings, synthetic_features, write_geojson
-from engine.store.sqlite import CCSStore
+from engine.store.store import CCSStore
 from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
@@ -121,7 +121,7 @@ def test_one_contour_failing_a_step_is_served_without_it_and_listed(
         (issue,) = d["contour_issues"]
         assert (issue["fid"], issue["id"], issue["step"]) == (fid, contour, step)
         assert issue["reason"] == f"InjectedFault: injected {step} fault"
-        labelled = set(store.labels("issues").fid.tolist())
+        labelled = set(store.labels("issues").anchors.fid.tolist())
         (record,) = store.load([fid])
         if step == "labels":
             assert fid not in labelled  # no label, the line itself as built
@@ -146,7 +146,7 @@ def test_the_same_build_without_a_fault_labels_solo_and_lists_nothing(
     assert d["state"] == "ready", d["build"]
     assert (d["contour_issues"], d["counts"]["contour_issues"]) == ([], 0)
     store = CCSStore(store_path, readonly=True)
-    assert fid_of(store, "issues", "solo") in set(store.labels("issues").fid.tolist())
+    assert fid_of(store, "issues", "solo") in set(store.labels("issues").anchors.fid.tolist())
     (kinked,) = store.load([fid_of(store, "issues", "kinked")])
     assert not np.array_equal(kinked.base, kinked.top)
 
