@@ -1,9 +1,10 @@
 """GET /morph/{dataset}/{z}/{x}/{y}.mvt and its TileJSON: the HTTP contract of morph tiles."""
 
 import pytest
+from support.mvt import decode
 
 from tests.app.conftest import LAT0, LON0
-from tests.app.helpers import decode, tile_for
+from tests.app.helpers import tile_for
 
 MVT = "application/vnd.mapbox-vector-tile"
 
