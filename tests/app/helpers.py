@@ -4,14 +4,10 @@ from __future__ import annotations
 
 import math
 
-import mapbox_vector_tile
+from support.mvt import decode
 
 EXTENT = 4096
 BUFFER = 64
-
-
-def decode(data: bytes) -> dict:
-    return mapbox_vector_tile.decode(data, default_options={"y_coord_down": True})
 
 
 def lines_of(geometry: dict) -> list[list[list[int]]]:

@@ -15,7 +15,9 @@ import pyogrio.raw
 import pytest
 import shapely
 from conftest import LAT0, LON0, LiveServer, synthetic_features
-from helpers import EXTENT, check_tile, decode, grid_to_lonlat, tile_for
+from helpers import EXTENT, check_tile, grid_to_lonlat, tile_for
+from support.mvt import decode
+from support.server import wait_ready
 from typer.testing import CliRunner
 
 from app.cli import _register_commands, app
@@ -229,16 +231,6 @@ def test_tilejson_attribution_is_escaped_and_version_follows_the_data(feet_serve
 
 
 # -- options per dataset, given with an upload ---------------------------------------------------------------
-
-
-def wait_ready(client, ident: str, timeout: float = 120.0) -> dict:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        d = client.get(f"/datasets/{ident}").json()
-        if d.get("state") in ("ready", "failed"):
-            return d
-        time.sleep(0.2)
-    raise TimeoutError(ident)
 
 
 def test_upload_options_name_the_elevation_ele_and_set_units_and_schedule(client):

@@ -6,7 +6,6 @@ from __future__ import annotations
 import gzip
 import json
 import re
-import shutil
 import sqlite3
 import subprocess
 from pathlib import Path
@@ -15,6 +14,7 @@ import mapbox_vector_tile
 import pytest
 from pmtiles.reader import MmapSource, Reader, all_tiles
 from pmtiles.tile import Compression, TileType
+from support.node import NODE_DIR, node_available
 from typer.testing import CliRunner
 
 import engine.serve.export as export_mod
@@ -28,7 +28,6 @@ from engine.types import Bounds
 _register_commands()
 runner = CliRunner()
 
-NODE_DIR = Path(__file__).parent / "node"
 DATA = Path(__file__).resolve().parents[1] / "data"
 MAXZOOM = 13
 
@@ -147,13 +146,9 @@ def test_export_a_dataset_to_pmtiles_read_with_the_python_reader(hills_pmtiles: 
     assert layers_and_ids(gzip.decompress(tiles[key])) == layers_and_ids(hills_expected[key])
 
 
-def node_available() -> bool:
-    return shutil.which("node") is not None and (NODE_DIR / "node_modules" / "pmtiles").is_dir()
-
-
 def test_export_pmtiles_read_with_the_js_reader(hills_pmtiles: Path, hills_expected: dict) -> None:
     """The pmtiles JS reader (what MapLibre's pmtiles protocol uses) reads the header and decodes tiles."""
-    if not node_available():
+    if not node_available("pmtiles"):
         pytest.fail("node and tests/app/node/node_modules are required: run `make install` (npm ci in tests/app/node)")
     keys = sorted(hills_expected, key=lambda k: (-len(hills_expected[k]), k))[:3]
     args = [f"{z}/{x}/{y}" for z, x, y in keys]

@@ -1,18 +1,9 @@
 import json
-import time
+
+from support.server import wait_ready
 
 from tests.app.conftest import synthetic_features
 from tests.app.helpers import check_tile, tile_for
-
-
-def wait_ready(client, ident, timeout=120):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        d = client.get(f"/datasets/{ident}").json()
-        if d["state"] in ("ready", "failed"):
-            return d
-        time.sleep(0.1)
-    raise TimeoutError(ident)
 
 
 def test_list(client):

@@ -3,10 +3,10 @@
 import json
 
 import pytest
+from support.server import wait_ready
 
 from tests.app.conftest import LAT0, LON0, synthetic_features
 from tests.app.helpers import check_tile, tile_for
-from tests.app.test_datasets import wait_ready
 
 BAD_GETS = [
     ("/tiles/hills/17/0/0.mvt", 404, "zoom 17"),

@@ -3,17 +3,14 @@
 from __future__ import annotations
 
 import json
-import shutil
 import subprocess
-from pathlib import Path
 
 import httpx
 import pytest
+from support.node import NODE_DIR, node_available
 
 from tests.app.conftest import LAT0, LON0, synthetic_features
 from tests.app.helpers import check_tile, tile_for
-
-NODE_DIR = Path(__file__).parent / "node"
 
 
 def test_endpoints_over_loopback(live):
@@ -68,15 +65,9 @@ def test_bad_requests_do_not_hurt_the_server(live):
     assert httpx.get(live.url + "/datasets/hills").json()["state"] == "ready"
 
 
-def node_available() -> bool:
-    return (
-        shutil.which("node") is not None and (NODE_DIR / "node_modules" / "@mapbox" / "vector-tile").is_dir()
-    )
-
-
 def test_maplibre_parser_decodes_tiles(live, tmp_path):
     """Tiles decoded by @mapbox/vector-tile (MapLibre's parser) have valid geometry in the right place."""
-    if not node_available():
+    if not node_available("@mapbox/vector-tile"):
         pytest.fail("node and tests/app/node/node_modules are required: run `make install` (npm ci in tests/app/node)")
     args = []
     for zoom in (9, 11, 13, 15):

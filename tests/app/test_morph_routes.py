@@ -1,11 +1,24 @@
 """GET /morph/{dataset}/{z}/{x}/{y}.mvt and its TileJSON: the HTTP contract of morph tiles."""
 
+import math
+
 import pytest
+import shapely
+from support.mvt import decode
 
 from tests.app.conftest import LAT0, LON0
-from tests.app.helpers import decode, tile_for
+from tests.app.helpers import EXTENT, lines_of, tile_for
 
 MVT = "application/vnd.mapbox-vector-tile"
+#: Tile units by which the start layer may lie from the plain tile of zoom z: both put the same slice on the
+#: grid, but the morph tile rounds its start and end ends on their own (one unit in each coordinate).
+START_TOLERANCE = math.sqrt(2.0)
+
+
+def inside_tile(geometry: dict) -> shapely.Geometry:
+    """A feature's lines within the tile square (the buffers beyond it are cut on their own terms)."""
+    lines = shapely.MultiLineString([[tuple(p) for p in line] for line in lines_of(geometry)])
+    return shapely.clip_by_rect(lines, 0, 0, EXTENT, EXTENT)
 
 
 def morph_url(z, x, y):
@@ -32,11 +45,18 @@ def test_the_start_layer_is_the_tile_of_zoom_z(client):
     z, x, y = tile_for(LON0, LAT0, 12)
     morph = decode(client.get(morph_url(z, x, y)).content)["contours"]["features"]
     plain = decode(client.get(f"/tiles/hills/{z}/{x}/{y}.mvt").content)["contours"]["features"]
-    drawn_at_z = {f["id"]: f["properties"] for f in morph if f["properties"]["min_zoom"] < z}
+    drawn_at_z = {f["id"]: f for f in morph if f["properties"]["min_zoom"] < z}
     assert {f["id"] for f in plain} <= set(drawn_at_z)
+    worst = 0.0
     for f in plain:
-        assert drawn_at_z[f["id"]]["t"] == f["properties"]["t"]
-        assert drawn_at_z[f["id"]]["elevation"] == f["properties"]["elevation"]
+        start = drawn_at_z[f["id"]]
+        assert start["properties"]["t"] == f["properties"]["t"]
+        assert start["properties"]["elevation"] == f["properties"]["elevation"]
+        want, got = inside_tile(f["geometry"]), inside_tile(start["geometry"])
+        assert want.is_empty == got.is_empty, f["id"]
+        if not want.is_empty:
+            worst = max(worst, shapely.hausdorff_distance(want, got))
+    assert worst <= START_TOLERANCE, f"the start layer lies {worst:.2f} tile units from the tile of zoom {z}"
 
 
 def test_morph_etag_and_gzip(client):

@@ -1,3 +1,4 @@
+import json
 import math
 
 import numpy as np
@@ -84,3 +85,35 @@ def test_each_method_returns_its_own_simplification(client, method):
         assert np.abs(got - np.column_stack(to_lonlat.transform(own[:, 0], own[:, 1]))).max() < 1e-6
         fewer += len(own) < len(rec.original_w) + rec.closed
     assert (fewer > 0) == (method != "original")
+
+
+#: Degrees by which the CLI's file and the route's answer may place a vertex apart: both are the one engine
+#: function's result, written to GeoJSON at 7 decimals (about 1 cm), so only the last written digit may differ.
+SAME_PLACE_DEG = 2e-7
+
+
+@pytest.mark.parametrize("scale", [100_000, 250_000])
+def test_cli_simplify_is_get_simplify(client, synthetic_path, tmp_path, scale):
+    """README: ``ccsm simplify``'s answer is ``GET /simplify``'s. The real CLI on the service's source, at the
+    service's scales, writes the same features (ids, properties) with the same geometry as the route returns."""
+    from typer.testing import CliRunner
+
+    from app.cli import _register_commands, app
+
+    _register_commands()
+    out = tmp_path / "cli.geojson"
+    args = ["simplify", str(synthetic_path), "--scale", str(scale), "-o", str(out), "--workers", "1"]
+    ran = CliRunner().invoke(app, args)
+    assert ran.exit_code == 0, ran.output
+    cli = {f["properties"]["id"]: f for f in json.loads(out.read_text())["features"]}
+    r = client.get(f"/simplify?dataset=hills&scale={scale}")
+    assert r.status_code == 200, r.text
+    route = {f["properties"]["id"]: f for f in r.json()["features"]}
+    assert len(cli) > 5 and cli.keys() == route.keys()
+    for ident, mine in cli.items():
+        theirs = route[ident]
+        assert mine["properties"] == theirs["properties"], ident
+        assert mine["geometry"]["type"] == theirs["geometry"]["type"], ident
+        a, b = np.asarray(mine["geometry"]["coordinates"]), np.asarray(theirs["geometry"]["coordinates"])
+        assert a.shape == b.shape, (ident, a.shape, b.shape)
+        assert np.abs(a - b).max() <= SAME_PLACE_DEG, ident

@@ -5,13 +5,14 @@ import numpy as np
 import pyproj
 import pytest
 import shapely
+from support.mvt import decode
 
 from engine.baselines import simplify_at_scale
 from engine.serve.datasets import SourceSpec, build_dataset
 from engine.store.store import CCSStore
 from engine.tiles.scale import zoom_for_scale
 from tests.app.conftest import LAT0, LON0, synthetic_features, write_geojson
-from tests.app.helpers import BUFFER, EXTENT, check_tile, decode, grid_to_lonlat, lines_of, tile_for
+from tests.app.helpers import BUFFER, EXTENT, check_tile, grid_to_lonlat, lines_of, tile_for
 
 MVT = "application/vnd.mapbox-vector-tile"
 
@@ -74,12 +75,26 @@ def test_etag_changes_with_the_data_version(client, tmp_path):
 
 
 def test_cors_on_get(client):
+    """Any origin may read tiles (CCSM_CORS_ORIGINS defaults to '*'): the GET carries the CORS headers a page
+    needs (the origin allowed, ETag and X-Tile-Scale readable), and the preflight allows GET and HEAD."""
     r = client.get(url(*tile_for(LON0, LAT0, 12)), headers={"origin": "https://example.org"})
+    assert r.status_code == 200
     assert r.headers["access-control-allow-origin"] == "*"
+    exposed = {h.strip().lower() for h in r.headers["access-control-expose-headers"].split(",")}
+    assert exposed >= {"etag", "x-request-id", "x-tile-scale"}, exposed
     pre = client.options(
-        url(1, 0, 0), headers={"origin": "https://x.org", "access-control-request-method": "GET"}
+        url(1, 0, 0),
+        headers={
+            "origin": "https://x.org",
+            "access-control-request-method": "GET",
+            "access-control-request-headers": "if-none-match",
+        },
     )
     assert pre.status_code == 200
+    assert pre.headers["access-control-allow-origin"] == "*"
+    assert {m.strip() for m in pre.headers["access-control-allow-methods"].split(",")} >= {"GET", "HEAD"}
+    assert "if-none-match" in pre.headers["access-control-allow-headers"].lower()
+    assert pre.headers["access-control-max-age"] == "600"
 
 
 def test_empty_tile_is_204(client):

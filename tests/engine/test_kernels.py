@@ -8,28 +8,11 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from reference_frechet import reference_frechet
 
 from engine.geom.kernels import discrete_frechet, dp_significance
 
 HYPOTHESIS = settings(deadline=None, max_examples=80)
-
-
-def reference_frechet(p: np.ndarray, q: np.ndarray) -> float:
-    """Eiter & Mannila's O(nm) dynamic programme, in plain Python."""
-    n, m = len(p), len(q)
-    ca = [[0.0] * m for _ in range(n)]
-    for i in range(n):
-        for j in range(m):
-            d = math.hypot(p[i][0] - q[j][0], p[i][1] - q[j][1])
-            if i == 0 and j == 0:
-                ca[i][j] = d
-            elif i == 0:
-                ca[i][j] = max(ca[i][j - 1], d)
-            elif j == 0:
-                ca[i][j] = max(ca[i - 1][j], d)
-            else:
-                ca[i][j] = max(min(ca[i - 1][j], ca[i - 1][j - 1], ca[i][j - 1]), d)
-    return ca[-1][-1]
 
 
 def reference_significance(xy: np.ndarray) -> list[float]:

@@ -10,10 +10,10 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import mapbox_vector_tile
 import numpy as np
 import pytest
 import shapely
+from support.mvt import decode, decode_served
 from synthetic_rasters import fractal_heights, write_geotiff
 
 from engine.io.source import sample_contours_path
@@ -31,10 +31,6 @@ MARGIN = 4.0
 #: One tile unit in each coordinate: the two ends of the level and the served slice are each rounded to the grid.
 TOLERANCE = math.sqrt(2.0)
 FRACTIONS = (0.0, 0.37, 0.81)  # the level's start, and between the eighths where t is sampled
-
-
-def decode(data: bytes) -> dict:
-    return mapbox_vector_tile.decode(data, default_options={"y_coord_down": True})
 
 
 def parts_of(geometry: dict) -> list[np.ndarray]:
@@ -100,7 +96,7 @@ def held_still(morph: dict) -> set[int]:
 
 def served_lines_at(renderer: Renderer, dataset: str, z: int, x: int, y: int, zoom: float) -> dict:
     served_tile = renderer.tile(dataset, z, x, y, zoom=zoom).data
-    served = {} if served_tile is None else decode(served_tile)
+    served = decode_served(served_tile)
     return {feat["id"]: parts_of(feat["geometry"]) for feat in served.get("contours", {}).get("features", [])}
 
 

@@ -1,16 +1,12 @@
-import mapbox_vector_tile
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from reference_mvt import encode_tile_reference
+from support.mvt import decode
 
 from engine.tiles.grid import drop_repeats
 from engine.tiles.mvt import LineFeature, encode_line_tile, encode_tile, varint, varint_array
-
-
-def decode(b):
-    return mapbox_vector_tile.decode(b, default_options={"y_coord_down": True})
 
 
 @given(st.lists(st.integers(0, 2**35 - 1), min_size=1, max_size=50))

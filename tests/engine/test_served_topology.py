@@ -16,11 +16,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-import mapbox_vector_tile
 import numpy as np
 import pytest
 import shapely
 from real_dems import write_maunga_whau_contours, write_topobathy_contours
+from support.mvt import decode_served
 from synthetic_rasters import fractal_heights, write_exact_level_geojson
 
 from engine.ccsm.topology import INPUT_TOUCH_M, crossing_pairs
@@ -130,10 +130,6 @@ def test_simplify_leaves_no_new_meeting_pair_at_any_scale(served: tuple[Renderer
     assert not bad, f"contours apart in the input meet (scale: pairs): {bad}"
 
 
-def decode(data: bytes | None) -> dict:
-    return {} if data is None else mapbox_vector_tile.decode(data, default_options={"y_coord_down": True})
-
-
 def tile_lines(layer: dict) -> dict[int, list[np.ndarray]]:
     out: dict[int, list[np.ndarray]] = {}
     for feat in layer.get("features", []):
@@ -209,7 +205,7 @@ def served_crossings(renderer: Renderer, dataset: str, morph: bool) -> list[tupl
             if morph:
                 lines = morph_lines(renderer, dataset, tile, drawn_at - z)
             else:
-                lines = tile_lines(decode(renderer.tile(dataset, *tile, zoom=zoom).data).get("contours", {}))
+                lines = tile_lines(decode_served(renderer.tile(dataset, *tile, zoom=zoom).data).get("contours", {}))
             out.append((z, zoom, scale, proper_new_crossings(lines, allowed)))
     return out
 
@@ -251,7 +247,7 @@ def test_tiles_have_no_proper_new_crossing_at_fractional_zooms(served: tuple[Ren
 
 def morph_lines(renderer: Renderer, dataset: str, tile, f: float) -> dict[int, list[np.ndarray]]:  # type: ignore[no-untyped-def]
     """The contours a morph tile draws at z + f, as docs/morph-tiles.md says a client draws them."""
-    return morph_drawing(decode(renderer.morph_tile(dataset, *tile).data), tile.z, f)
+    return morph_drawing(decode_served(renderer.morph_tile(dataset, *tile).data), tile.z, f)
 
 
 def morph_drawing(morph: dict, z: int, f: float) -> dict[int, list[np.ndarray]]:
@@ -300,7 +296,7 @@ def test_morph_tiles_never_cross_at_any_fraction(served: tuple[Renderer, str]) -
     bad = []
     for z in sorted({z for z, _ in zooms_to_check(renderer, dataset)}):
         for tile in tiles_covering(bounds, z):
-            morph = decode(renderer.morph_tile(dataset, *tile).data)
+            morph = decode_served(renderer.morph_tile(dataset, *tile).data)
             for f in fractions_to_draw(rng):
                 lines = morph_drawing(morph, z, float(f))
                 drawn += bool(lines)

@@ -9,6 +9,7 @@ import pytest
 import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from reference_frechet import reference_frechet
 from scipy.spatial.distance import cdist
 
 from engine.ccsm.ccs import build_ccs
@@ -28,26 +29,6 @@ from engine.params import BuildParams
 from engine.types import Contour
 
 HYPOTHESIS = settings(deadline=None, max_examples=60)
-
-
-def reference_frechet(p: np.ndarray, q: np.ndarray) -> float:
-    """Eiter & Mannila's O(nm) dynamic programme, in plain Python."""
-    n, m = len(p), len(q)
-    ca = [[0.0] * m for _ in range(n)]
-    for i in range(n):
-        for j in range(m):
-            d = math.hypot(p[i][0] - q[j][0], p[i][1] - q[j][1])
-            prev = (
-                0.0
-                if i == j == 0
-                else min(
-                    ca[i - 1][j] if i > 0 else math.inf,
-                    ca[i - 1][j - 1] if i > 0 and j > 0 else math.inf,
-                    ca[i][j - 1] if j > 0 else math.inf,
-                )
-            )
-            ca[i][j] = max(prev, d)
-    return ca[-1][-1]
 
 
 @st.composite

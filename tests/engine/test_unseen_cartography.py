@@ -22,7 +22,13 @@ from shapely import affinity
 from synthetic_rasters import fractal_heights, write_geotiff
 
 from engine.cartography.labels import LabelStyle, metres_per_px
-from engine.cartography.style import INDEX_LINE_WIDTH_PX, LINE_WIDTH_PX, RankFade, rank_opacity_at
+from engine.cartography.style import (
+    INDEX_LINE_WIDTH_ALONE_PX,
+    INDEX_LINE_WIDTH_PX,
+    LINE_WIDTH_PX,
+    RankFade,
+    rank_opacity_at,
+)
 from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import Renderer
 from engine.serve.simplify import simplify
@@ -42,11 +48,12 @@ TERRAINS = {
 }
 #: Terrains whose labels must compete for room (pairs of labels whose boxes could meet, at least this many).
 CROWDED, MIN_COMPETING = {"utm32n-mountains"}, 20
-#: Legible: the lines cover at least this share of the data's area at every scale (a map, not blank paper) ...
-MIN_INK = 0.01
-#: ... and at most this share (counted as length times width, overlaps twice: an upper bound; beyond half the
-#: area, lines would no longer read as lines).
-MAX_INK = 0.5
+#: The ink stays even (README, "Interval by scale"): from the source scale to the target scale, each terrain's
+#: line ink stays within these multiples of its value at the source scale. Measured on this code (13 scales):
+#: hills 0.87-1.51x (two ranks: once the 20 m lines are gone at 1:250,000 only the top rank is left, and its
+#: density grows with the scale), mountains 0.72-1.00x; the bands are those figures with a few hundredths of room.
+#: (The sample in Chromium, bench/bench_ink.py, stays within 0.96-1.06x; this is the same rule on unseen terrain.)
+INK_BANDS = {"utm33n-hills": (0.85, 1.55), "utm32n-mountains": (0.70, 1.03)}
 
 
 @pytest.fixture(scope="module", params=sorted(TERRAINS))
@@ -114,8 +121,9 @@ def test_labels_carry_their_elevation_with_the_unit_and_sit_on_index_contours(se
 
 def ink_share(renderer: Renderer, dataset: str, scale: float, *, all_levels: bool = False) -> float:
     """Share of the data's area covered by lines at a scale: each drawn contour's length on screen times its
-    width (index lines the heavier width, an upper bound) times its rank's opacity there, over the area.
-    ``all_levels``: every level, at full opacity (the map without the interval schedule)."""
+    width as the style draws it there (index lines thinning from INDEX_LINE_WIDTH_PX to
+    INDEX_LINE_WIDTH_ALONE_PX as rank 0 fades, style.line_width) times its rank's opacity, over the area
+    (overlaps count twice). ``all_levels``: every level, at full opacity and width (no interval schedule)."""
     carto = renderer.cartography(dataset)
     zoom = float(zoom_for_scale(scale, carto.latitude))
     mpp = float(metres_per_px(zoom))
@@ -123,24 +131,29 @@ def ink_share(renderer: Renderer, dataset: str, scale: float, *, all_levels: boo
         k.rank: RankFade(k.rank, k.fade_zoom, None if k.hide_scale is None else k.hide_zoom)
         for k in carto.schedule.ranks
     }
+    base = fades[min(fades)]  # rank 0: index lines thin as it fades (same ramp as its opacity)
+    index_width = INDEX_LINE_WIDTH_ALONE_PX + (INDEX_LINE_WIDTH_PX - INDEX_LINE_WIDTH_ALONE_PX) * (
+        1.0 if all_levels else rank_opacity_at(base, zoom)
+    )
     info, _ = renderer.info(dataset)
     minx, miny, maxx, maxy = info.bounds_3857
     area_px = (maxx - minx) * (maxy - miny) / mpp**2
     ink = 0.0
     for c in simplify(renderer, dataset, scale, all_levels=all_levels).contours:
         length_px = float(np.hypot(*np.diff(c.coords_3857, axis=0).T).sum()) / mpp
-        width = INDEX_LINE_WIDTH_PX if c.level == 1 else LINE_WIDTH_PX
+        width = index_width if c.level == 1 else LINE_WIDTH_PX
         ink += length_px * width * (1.0 if all_levels else rank_opacity_at(fades[c.rank], zoom))
     return ink / area_px
 
 
-@pytest.mark.parametrize("served", ["utm33n-hills"], indirect=True)
-def test_the_map_is_legible_from_the_source_scale_to_the_target_scale(served):
+def test_the_ink_stays_even_from_the_source_scale_to_the_target_scale(served):
     renderer, dataset, _ = served
-    scales = np.geomspace(SOURCE_SCALE, TARGET_SCALE, 7)
+    scales = np.geomspace(SOURCE_SCALE, TARGET_SCALE, 13)
     shares = [ink_share(renderer, dataset, float(s)) for s in scales]
-    table = ", ".join(f"1:{s:,.0f} {v:.3f}" for s, v in zip(scales, shares, strict=True))
-    assert all(MIN_INK <= v <= MAX_INK for v in shares), table
+    ratios = [v / shares[0] for v in shares]
+    table = ", ".join(f"1:{s:,.0f} {r:.3f}x" for s, r in zip(scales, ratios, strict=True))
+    low, high = INK_BANDS[dataset]
+    assert low <= min(ratios) and max(ratios) <= high, f"{dataset}, ink against the source scale's: {table}"
     # The rules do the thinning: every level drawn at the target scale would cover at least twice the area.
     every = ink_share(renderer, dataset, TARGET_SCALE, all_levels=True)
     assert every > 2 * shares[-1], (every, table)

@@ -1,0 +1,4 @@
+"""Helpers the tests share, each written once: MVT decoding (mvt), waiting on a service (server), node (node).
+
+Imported as ``support.<module>`` (tests/ is on the path, as for tests/reference_mvt.py).
+"""
