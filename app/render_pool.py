@@ -27,6 +27,7 @@ from starlette.requests import Request
 from app.render_jobs import HEAVY_NICENESS, LIGHT_NICENESS, MORPH_NICENESS, Job, RenderConfig, Rendered, worker_main
 from app.settings import Settings
 from engine.errors import CCSMError
+from engine.serve.methods import Method
 
 log = logging.getLogger("ccsm.render")
 
@@ -279,11 +280,6 @@ def _log_failure(task: asyncio.Task[None]) -> None:
         log.error("starting a render worker failed", exc_info=task.exception())
 
 
-#: Methods whose tiles go to the heavy lane: simplifiers run per request on whole contours (pure Python,
-#: Wang–Müller super-linear), where a ccsm or original tile only slices stored rows.
-HEAVY_METHODS = frozenset({"dp", "wm", "vw"})
-
-
 @dataclass
 class RenderLanes:
     """Three pools, so slow requests cannot hold up quick ones: ``light`` draws ccsm and original tiles
@@ -296,9 +292,11 @@ class RenderLanes:
     heavy: RenderPool
     morph: RenderPool
 
-    def for_tile(self, method: str) -> RenderPool:
-        """The lane of a tile drawn with ``method``."""
-        return self.heavy if method in HEAVY_METHODS else self.light
+    def for_tile(self, method: Method) -> RenderPool:
+        """The lane of a tile drawn with ``method``: the heavy one for a method that simplifies whole contours
+        on each request (pure Python, Wang–Müller super-linear), where a ccsm or original tile only cuts
+        stored rows."""
+        return self.heavy if method.simplifies_per_request else self.light
 
     def all(self) -> tuple[RenderPool, ...]:
         """Every lane."""

@@ -68,6 +68,7 @@ async def get_tile(
     """One Mapbox Vector Tile of a dataset's contours, generalized for the tile's (fractional) zoom."""
     renderer = service.renderer
     _, zoom, t = renderer.check_tile_request(z, x, y, q.zoom, q.method, q.t)
+    method = renderer.methods[q.method]
     version = service.require_ready(dataset)
     gz = accepts_gzip(request)
     etag = make_etag(
@@ -78,7 +79,7 @@ async def get_tile(
         y,
         zoom,
         q.method,
-        t if q.method == "ccsm" else None,
+        t if method.honours_t else None,
         settings.tile_extent,
         settings.tile_buffer,
         "gz" if gz else "id",
@@ -87,7 +88,7 @@ async def get_tile(
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
     job = TileJob(dataset, z, x, y, zoom, q.method, t, store=service.settings.store_path, gzip=gz)
-    result = await unless_client_goes(request, lanes.for_tile(q.method).run(job))
+    result = await unless_client_goes(request, lanes.for_tile(method).run(job))
     headers["X-Tile-Scale"] = f"{result.scale:.1f}"
     headers["Server-Timing"] = server_timing(result)
     if result.body is None:
