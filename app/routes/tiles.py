@@ -9,12 +9,12 @@ from urllib.parse import urlencode
 from fastapi import APIRouter, Depends, Path, Request, Response
 from fastapi.responses import JSONResponse
 
-from app.dependencies import TileQuery, get_service, get_settings
-from app.disconnect import unless_client_goes
-from app.public_url import public_base_url
-from app.render_jobs import MorphJob, Rendered, TileJob
-from app.render_pool import RenderLanes, get_render_lanes
-from app.responses import accepts_gzip, body_response, etag_matches, make_etag
+from app.http.disconnect import unless_client_goes
+from app.http.public_url import public_base_url
+from app.http.responses import accepts_gzip, body_response, etag_matches, make_etag
+from app.render.jobs import MorphJob, Rendered, TileJob
+from app.render.pool import RenderLanes, get_render_lanes
+from app.routes.dependencies import TileQuery, get_service, get_settings
 from app.service import DatasetService, lonlat_bounds
 from app.settings import Settings
 from engine.cartography.dataset import contour_fields, label_fields
@@ -175,7 +175,7 @@ def tilejson_response(
     info, interval = service.renderer.info(dataset)
     query = [(k, v) for k, v in request.query_params.multi_items() if k != "v"]
     query.append(("v", str(version)))
-    base = public_base_url(request, settings)  # never the Host header: see app/public_url.py
+    base = public_base_url(request, settings)  # never the Host header: see app/http/public_url.py
     url = f"{base}/{kind}/{dataset}/{{z}}/{{x}}/{{y}}.mvt?{urlencode(query)}"
     bounds = lonlat_bounds(info)
     lat = (bounds[1] + bounds[3]) / 2

@@ -2,7 +2,7 @@
 
 from typing import Any, cast
 
-from app.render_pool import RenderLanes, RenderPool
+from app.render.pool import RenderLanes, RenderPool
 from engine.method_names import BASELINE_METHODS
 from engine.serve.methods import make_methods
 
