@@ -19,15 +19,15 @@ from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from app.api_docs import add_api_docs
-from app.cors import JsonCORSMiddleware
-from app.errors import add_exception_handlers, error_body, public_message
-from app.head_requests import HeadAsGetMiddleware
+from app.datasets.uploads import upload_checker_for
+from app.http.api_docs import add_api_docs
+from app.http.cors import JsonCORSMiddleware
+from app.http.errors import add_exception_handlers, error_body, public_message
+from app.http.head_requests import HeadAsGetMiddleware
 from app.lifespan import lifespan
-from app.render_pool import RETRY_AFTER_S, RenderUnavailable, render_lanes_for
+from app.render.pool import RETRY_AFTER_S, RenderUnavailable, render_lanes_for
 from app.routes import datasets, hillshade, meta, simplify, styles, tiles
 from app.settings import Settings
-from app.uploads import upload_checker_for
 
 log = logging.getLogger("ccsm.app")
 

@@ -1,6 +1,6 @@
 """The datasets a running service knows: stored ones, configured sources, uploads, and their builds.
 
-Builds run in processes of their own, a bounded number at a time (:mod:`app.builds`); the service answers
+Builds run in processes of their own, a bounded number at a time (:mod:`app.datasets.builds`); the service answers
 meanwhile, and a dataset being rebuilt keeps serving its previous version. A build's progress lives in the
 store's ``builds`` table, so every worker process sees it. An upload's id is reserved in that table in one
 transaction (:meth:`CCSStore.reserve`), so two requests, or two server processes, never get the same id.
@@ -17,11 +17,12 @@ from typing import Any
 
 import numpy as np
 
-from app.builds import BuildRunner
-from app.errors import BuildQueueFull, DatasetExists, log_safe
+from app.datasets.builds import BuildRunner
+from app.datasets.upload_check import CheckedUpload
+from app.datasets.uploads import INCOMING_PREFIX
+from app.errors import BuildQueueFull, DatasetExists
+from app.http.errors import log_safe
 from app.settings import Settings
-from app.upload_check import CheckedUpload
-from app.uploads import INCOMING_PREFIX
 from engine.cartography.options import PARAMS_KEY as CARTOGRAPHY_KEY
 from engine.cartography.options import CartographyOptions
 from engine.errors import CCSMError, StoreError, StoreNotReady, StoreUnwritable, UnknownLayer
@@ -263,7 +264,7 @@ class DatasetService:
         self, incoming: Path, checked: CheckedUpload, *, dataset: str | None, name: str | None, params: UploadParams
     ) -> dict[str, Any]:
         """Reserve the id of an upload that passed its check, keep its file and queue its build; the JSON
-        answer of POST /datasets. The file (streamed there by :func:`app.uploads.receive_upload`) is kept
+        answer of POST /datasets. The file (streamed there by :func:`app.datasets.uploads.receive_upload`) is kept
         only if the upload is accepted.
 
         Raises

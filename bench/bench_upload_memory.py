@@ -1,8 +1,8 @@
 """Memory of the server around large uploads (issue 10): RSS before, at the peak and after four concurrent
 uploads of about 19 MB each (one line of ~760,000 vertices, the issue's hostile upload), builds included.
 
-The server streams each body to disk and parses it in a check process of its own (app/uploads.py), one at a
-time by default; builds run in processes of their own (app/builds.py). So the server's own RSS should stay
+The server streams each body to disk and parses it in a check process of its own (app/datasets/uploads.py), one at a
+time by default; builds run in processes of their own (app/datasets/builds.py). So the server's own RSS should stay
 near its baseline throughout, and the child processes' memory is bounded by how many run at once.
 To stay within a few minutes the builds are deleted (their processes ended) once every upload is accepted and
 ``--build-seconds`` have passed; pass a large value to let them finish.

@@ -11,7 +11,8 @@ import numbers
 from collections.abc import Sequence
 
 from engine.errors import InvalidParameter
-from engine.types import METHODS, Bounds
+from engine.method_names import METHODS
+from engine.types import Bounds
 
 #: Largest scale denominator accepted (1:10 billion is already smaller than a whole-earth map).
 MAX_SCALE = 1e10

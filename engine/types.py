@@ -15,17 +15,13 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Literal, NamedTuple, TypeAlias, get_args, overload
+from typing import NamedTuple, TypeAlias, overload
 
 import numpy as np
 from numpy.typing import NDArray
 
 #: (n, 2) float64 coordinates in metres of a projected CRS, (x, y) order.
 Coords: TypeAlias = NDArray[np.float64]
-
-#: Simplification methods every tool of ccsm can compare.
-Method = Literal["ccsm", "dp", "wm", "vw", "original"]
-METHODS: tuple[str, ...] = get_args(Method)
 
 #: Feature ids come from the input file (its id or its index).
 FeatureId: TypeAlias = str | int

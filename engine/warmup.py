@@ -18,6 +18,7 @@ def warm_up() -> float:
     from engine.ccsm.similarity import SimilarityReference, similarity
     from engine.evaluation.levels import ranks_from_levels
     from engine.geom.douglas_peucker import douglas_peucker
+    from engine.method_names import BASELINE_METHODS
     from engine.tiles.significance import row_significance
 
     start = time.perf_counter()
@@ -29,7 +30,7 @@ def warm_up() -> float:
         similarity(coords, coords[::2], closed)
         rows = np.vstack([coords, coords[:1]]) if closed else coords  # a ring's rows are closed paths
         SimilarityReference.of(coords, closed).slice_similarities(rows, rows * 0.99, np.linspace(0.0, 1.0, 11))
-        for method in ("dp", "vw", "wm"):
+        for method in BASELINE_METHODS:
             levels = ladder(method, coords, closed, levels=5)
             ranks_from_levels(coords, levels)
             simplify_at_scale(method, coords, closed, 250_000)
@@ -95,8 +96,10 @@ def _render_one_tile(ring: np.ndarray, line: np.ndarray) -> None:
             info = save_built(store, "warmup", built, name="warmup", source="warmup", digest="0", params={})
             z, x, y = tiles_covering(Bounds(*info.bounds_3857), 12)[0]
             renderer = Renderer(store)
-            for method in ("ccsm", "original"):
-                renderer.tile("warmup", z, x, y, zoom=z + 0.5 if method == "ccsm" else None, method=method)
+            for name, method in renderer.methods.items():
+                if method.simplifies_per_request:  # no tile kernels of their own: compiled above
+                    continue
+                renderer.tile("warmup", z, x, y, zoom=z + 0.5 if method.honours_t else None, method=name)
             renderer.morph_tile("warmup", z, x, y)  # its own kernels (morph runs), else compiled on first use
             # A dataset larger than the contour memory joins each tile's stored pieces: its own kernels.
             Renderer(store, contour_cache_bytes=0).tile("warmup", z, x, y)

@@ -8,13 +8,13 @@ from fastapi import APIRouter, Depends, Path, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
 
-from app.dependencies import get_service, get_settings
-from app.disconnect import unless_client_goes
-from app.security import require_json_body, require_writer
+from app.datasets.upload_check import UploadCheck
+from app.datasets.uploads import get_upload_checker, receive_upload
+from app.http.disconnect import unless_client_goes
+from app.routes.dependencies import get_service, get_settings
+from app.routes.security import require_json_body, require_writer
 from app.service import DatasetService, UploadParams
 from app.settings import Settings
-from app.upload_check import UploadCheck
-from app.uploads import get_upload_checker, receive_upload
 from engine.cartography.options import CartographyOptions
 
 router = APIRouter(tags=["datasets"])

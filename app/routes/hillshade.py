@@ -6,11 +6,11 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends, Path, Request, Response
 
-from app.dependencies import get_service, get_settings
-from app.disconnect import unless_client_goes
-from app.render_jobs import HillshadeJob
-from app.render_pool import RenderLanes, get_render_lanes
-from app.responses import etag_matches, make_etag
+from app.http.disconnect import unless_client_goes
+from app.http.responses import etag_matches, make_etag
+from app.render.jobs import HillshadeJob
+from app.render.pool import RenderLanes, get_render_lanes
+from app.routes.dependencies import get_service, get_settings
 from app.service import DatasetService
 from app.settings import Settings
 from engine.tiles.grid import check_tile

@@ -7,7 +7,7 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, Request
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 
-from app.dependencies import get_settings
+from app.routes.dependencies import get_settings
 from app.service import DatasetService
 from app.settings import Settings
 

@@ -6,11 +6,11 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends, Query, Request, Response
 
-from app.dependencies import MethodName, get_service, get_settings
-from app.disconnect import unless_client_goes
-from app.render_jobs import SimplifyJob
-from app.render_pool import RenderLanes, get_render_lanes
-from app.responses import accepts_gzip, body_response, etag_matches, make_etag
+from app.http.disconnect import unless_client_goes
+from app.http.responses import accepts_gzip, body_response, etag_matches, make_etag
+from app.render.jobs import SimplifyJob
+from app.render.pool import RenderLanes, get_render_lanes
+from app.routes.dependencies import MethodName, get_service, get_settings
 from app.service import DatasetService
 from app.settings import Settings
 from engine.checks import MAX_SCALE

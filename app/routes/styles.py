@@ -11,9 +11,9 @@ from fastapi import APIRouter, Depends, Request, Response
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, JSONResponse
 
-from app.dependencies import get_service, get_settings
-from app.public_url import public_base_url
-from app.responses import etag_matches, make_etag
+from app.http.public_url import public_base_url
+from app.http.responses import etag_matches, make_etag
+from app.routes.dependencies import get_service, get_settings
 from app.service import DatasetService, lonlat_bounds
 from app.settings import Settings
 from engine.cartography.glyphs import glyph_range_pbf
@@ -51,7 +51,7 @@ def get_style(
     """A complete MapLibre style v8 of a dataset: hillshade (with a DEM), contours by rank and index, labels."""
     version = service.require_ready(dataset)
     info, _ = service.renderer.info(dataset)
-    base = public_base_url(request, settings)  # never the Host header: see app/public_url.py
+    base = public_base_url(request, settings)  # never the Host header: see app/http/public_url.py
     ds = quote(dataset, safe="")
     etag = make_etag("style", dataset, version, base)
     headers = {"ETag": etag, "Cache-Control": f"public, max-age={STYLE_MAX_AGE_S}"}

@@ -9,12 +9,12 @@ from urllib.parse import urlencode
 from fastapi import APIRouter, Depends, Path, Request, Response
 from fastapi.responses import JSONResponse
 
-from app.dependencies import TileQuery, get_service, get_settings
-from app.disconnect import unless_client_goes
-from app.public_url import public_base_url
-from app.render_jobs import MorphJob, Rendered, TileJob
-from app.render_pool import RenderLanes, get_render_lanes
-from app.responses import accepts_gzip, body_response, etag_matches, make_etag
+from app.http.disconnect import unless_client_goes
+from app.http.public_url import public_base_url
+from app.http.responses import accepts_gzip, body_response, etag_matches, make_etag
+from app.render.jobs import MorphJob, Rendered, TileJob
+from app.render.pool import RenderLanes, get_render_lanes
+from app.routes.dependencies import TileQuery, get_service, get_settings
 from app.service import DatasetService, lonlat_bounds
 from app.settings import Settings
 from engine.cartography.dataset import contour_fields, label_fields
@@ -68,6 +68,7 @@ async def get_tile(
     """One Mapbox Vector Tile of a dataset's contours, generalized for the tile's (fractional) zoom."""
     renderer = service.renderer
     _, zoom, t = renderer.check_tile_request(z, x, y, q.zoom, q.method, q.t)
+    method = renderer.methods[q.method]
     version = service.require_ready(dataset)
     gz = accepts_gzip(request)
     etag = make_etag(
@@ -78,7 +79,7 @@ async def get_tile(
         y,
         zoom,
         q.method,
-        t if q.method == "ccsm" else None,
+        t if method.honours_t else None,
         settings.tile_extent,
         settings.tile_buffer,
         "gz" if gz else "id",
@@ -87,7 +88,7 @@ async def get_tile(
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
     job = TileJob(dataset, z, x, y, zoom, q.method, t, store=service.settings.store_path, gzip=gz)
-    result = await unless_client_goes(request, lanes.for_tile(q.method).run(job))
+    result = await unless_client_goes(request, lanes.for_tile(method).run(job))
     headers["X-Tile-Scale"] = f"{result.scale:.1f}"
     headers["Server-Timing"] = server_timing(result)
     if result.body is None:
@@ -174,7 +175,7 @@ def tilejson_response(
     info, interval = service.renderer.info(dataset)
     query = [(k, v) for k, v in request.query_params.multi_items() if k != "v"]
     query.append(("v", str(version)))
-    base = public_base_url(request, settings)  # never the Host header: see app/public_url.py
+    base = public_base_url(request, settings)  # never the Host header: see app/http/public_url.py
     url = f"{base}/{kind}/{dataset}/{{z}}/{{x}}/{{y}}.mvt?{urlencode(query)}"
     bounds = lonlat_bounds(info)
     lat = (bounds[1] + bounds[3]) / 2

@@ -23,11 +23,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from engine.baselines.common import BASELINE_METHODS, as_contour, check_levels, check_method
+from engine.baselines.common import as_contour, check_levels, check_method
 from engine.baselines.dp import dp_at_scale, dp_ladder
 from engine.baselines.vw import effective_areas, vw_at_scale, vw_ladder
 from engine.baselines.wang_muller import DEFAULT_WM_PARAMS, WMParams, bend_count, wm_at_scale, wm_ladder
 from engine.checks import check_scale
+from engine.method_names import BASELINE_METHODS
 from engine.types import Coords
 
 __all__ = [
@@ -51,6 +52,8 @@ _AT_SCALE: dict[str, Callable[[Coords, bool, float], Coords]] = {
     "wm": wm_at_scale,
     "vw": vw_at_scale,
 }
+
+assert tuple(_LADDERS) == tuple(_AT_SCALE) == BASELINE_METHODS, "every baseline name has both implementations"
 
 
 def ladder(method: str, coords: Coords, closed: bool, levels: int = 100) -> list[Coords]:

@@ -13,10 +13,8 @@ from numpy.typing import NDArray
 
 from engine import checks
 from engine.errors import InvalidContour, InvalidParameter
+from engine.method_names import BASELINE_METHODS
 from engine.types import Coords
-
-#: The methods :mod:`engine.baselines` implements, in the order the paper compares them.
-BASELINE_METHODS: tuple[str, ...] = ("dp", "wm", "vw")
 
 
 def min_vertices(closed: bool) -> int:

@@ -27,12 +27,12 @@ from engine.baselines import simplify_at_scale
 from engine.ccsm.ccs import CCS, build_ccs
 from engine.ccsm.slicing import slice_rows
 from engine.errors import InvalidParameter
+from engine.method_names import BASELINE_METHODS, CCSM, COMPARED_METHODS
 from engine.params import BuildParams
 from engine.types import Contour, Coords
 
 #: Methods compared, in the order of every table and figure.
-EVAL_METHODS: tuple[str, ...] = ("ccsm", "dp", "wm", "vw")
-BASELINES: tuple[str, ...] = ("dp", "wm", "vw")
+EVAL_METHODS: tuple[str, ...] = COMPARED_METHODS
 
 
 @dataclass(frozen=True)
@@ -236,8 +236,8 @@ def contour_ladders(contour: Contour, levels: int, params: BuildParams) -> dict[
     CCSMError
         The contour cannot be simplified by one of the methods (the caller lists it as a bad feature).
     """
-    out: dict[str, Ladder] = {"ccsm": surface_ladder(build_ccs(contour, params), levels)}
-    for method in BASELINES:
+    out: dict[str, Ladder] = {CCSM: surface_ladder(build_ccs(contour, params), levels)}
+    for method in BASELINE_METHODS:
         full = baseline_ladder(method, contour.coords, contour.closed, levels)
         level_map = None
         if params.target_mode == "scale":

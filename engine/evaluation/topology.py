@@ -9,7 +9,7 @@ out, and so are the rings too small for a scale, for every method alike.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,11 +21,12 @@ from engine.ccsm.regression import t_for_scale
 from engine.ccsm.topology import INPUT_TOUCH_M, crossing_pairs
 from engine.errors import InvalidParameter
 from engine.geom.polyline import closed_path
+from engine.method_names import BASELINE_METHODS, CCSM, COMPARED_METHODS
 from engine.params import BuildParams
 from engine.types import Contour, ContourSet, Coords
 
 #: Methods of the table, in column order.
-SCALE_METHODS = ("ccsm", "dp", "wm", "vw")
+SCALE_METHODS: tuple[str, ...] = COMPARED_METHODS
 
 
 @dataclass(frozen=True)
@@ -61,13 +62,28 @@ def _as_path(coords: Coords, closed: bool) -> Coords:
     return closed_path(coords) if closed else coords
 
 
-def _line_at(built: BuiltSet, inputs: Sequence[Contour], i: int, method: str, scale: float) -> Coords:
-    """Contour ``i`` by ``method`` at a scale (a ring as a closed path)."""
-    if method == "ccsm":
-        surface = built.surfaces[i]
-        return surface.at(t_for_scale(built.model.ladder, surface.t_at_scale, scale))
+def _surface_line(built: BuiltSet, inputs: Sequence[Contour], i: int, method: str, scale: float) -> Coords:
+    """Contour ``i`` sliced on its continuous changing surface at its t for the scale."""
+    surface = built.surfaces[i]
+    return surface.at(t_for_scale(built.model.ladder, surface.t_at_scale, scale))
+
+
+def _baseline_line(built: BuiltSet, inputs: Sequence[Contour], i: int, method: str, scale: float) -> Coords:
+    """Contour ``i`` as the per-scale simplifier ``method`` gives it at the scale (a ring as a closed path)."""
     c = inputs[i]
     return _as_path(simplify_at_scale(method, c.coords, c.closed, scale), c.closed)
+
+
+#: How each method of the table draws a contour at a scale.
+_LINE_AT: dict[str, Callable[[BuiltSet, Sequence[Contour], int, str, float], Coords]] = {
+    CCSM: _surface_line,
+    **dict.fromkeys(BASELINE_METHODS, _baseline_line),
+}
+
+
+def _line_at(built: BuiltSet, inputs: Sequence[Contour], i: int, method: str, scale: float) -> Coords:
+    """Contour ``i`` by ``method`` at a scale (a ring as a closed path)."""
+    return _LINE_AT[method](built, inputs, i, method, scale)
 
 
 def topology_scales(source_scale: float, target_scale: float, n: int) -> NDArray[np.float64]:

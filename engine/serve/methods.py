@@ -2,7 +2,9 @@
 
 Tiles, ``/simplify`` and the CLI ask a :class:`Method` the same two questions: which lines to draw in a tile
 (:meth:`Method.tile_lines`, fed to the one tile pipeline of :mod:`engine.serve.renderer`) and what one
-contour looks like at a scale (:meth:`Method.contour_at`).
+contour looks like at a scale (:meth:`Method.contour_at`). Whatever else a route or a pool needs to know about
+a method (whether a pinned t applies, whether its tiles keep the input's topology, whether it simplifies on
+each request) it asks the method too, never its name; the names are those of :mod:`engine.method_names`.
 """
 
 from __future__ import annotations
@@ -16,16 +18,17 @@ from typing import Any, ClassVar, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from engine.baselines import BASELINE_METHODS, simplify_at_scale
+from engine.baselines import simplify_at_scale
 from engine.ccsm.regression import t_at_scales
 from engine.ccsm.similarity import similarity
 from engine.errors import InvalidParameter
 from engine.geom.polyline import closed_path
 from engine.io.crs import WEB_MERCATOR, make_transformer
+from engine.method_names import BASELINE_METHODS, CCSM, METHODS, ORIGINAL
 from engine.serve.cache import LRUCache
 from engine.serve.pack import DatasetPack, LineSet
 from engine.store.records import ContourRecord, DatasetInfo
-from engine.types import METHODS, Coords
+from engine.types import Coords
 
 #: Baseline results are cached per 1/16 of a zoom level of scale: a 4 % step, invisible on screen.
 SCALE_STEPS_PER_OCTAVE = 16
@@ -88,6 +91,13 @@ class Method(ABC):
     #: contours); a tile of a dataset too large to pack whole reads only those (engine.serve.pieces).
     stored_rows: ClassVar[str | None] = None
 
+    @property
+    def simplifies_per_request(self) -> bool:
+        """Whether the method simplifies whole contours on each request instead of cutting stored rows: pure
+        Python and up to super-linear in a contour's size (Wang–Müller), so its tiles queue apart from the
+        millisecond ones."""
+        return self.stored_rows is None
+
     def visible(self, pack: DatasetPack, idx: NDArray[np.intp], scale: float) -> NDArray[np.intp]:
         """The contours of ``idx`` drawn at a scale: small rings vanish where the map cannot show them."""
         return idx[scale < pack.vanish[idx]]
@@ -126,7 +136,7 @@ class TileContext:
 class ContinuousMethod(Method):
     """CCSM: every contour sliced on its continuous changing surface at its own t."""
 
-    name = "ccsm"
+    name = CCSM
     honours_t = True
     stored_rows = "ccs"
 
@@ -150,7 +160,7 @@ class ContinuousMethod(Method):
 class OriginalMethod(Method):
     """The input contours, unsimplified (every contour at every scale)."""
 
-    name = "original"
+    name = ORIGINAL
     stored_rows = "original"
 
     def visible(self, pack: DatasetPack, idx: NDArray[np.intp], scale: float) -> NDArray[np.intp]:
@@ -247,7 +257,7 @@ def make_methods(
     ``max_vertices`` caps the contour size per baseline method (e.g. ``{"wm": 50_000}``); none by default.
     """
     cache: LRUCache[tuple[int, str, int], tuple[Coords, Coords]] = LRUCache(baseline_cache_entries)
-    methods: dict[str, Method] = {"ccsm": ContinuousMethod(), "original": OriginalMethod()}
+    methods: dict[str, Method] = {CCSM: ContinuousMethod(), ORIGINAL: OriginalMethod()}
     limits = max_vertices or {}
     for name in BASELINE_METHODS:
         methods[name] = BaselineMethod(name, cache, limits.get(name))

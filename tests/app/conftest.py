@@ -106,7 +106,7 @@ def client(tmp_path: Path, built_store: Path, synthetic_path: Path) -> Iterator[
     src._con().execute("PRAGMA wal_checkpoint(TRUNCATE)")
     store.write_bytes(built_store.read_bytes())
     app = create_app(make_settings(store, [synthetic_path], max_upload_mb=0.5, build_workers=1))
-    # A local client addressing the server as localhost: writes need no token (app/security.py).
+    # A local client addressing the server as localhost: writes need no token (app/routes/security.py).
     with TestClient(app, base_url="http://localhost", client=("127.0.0.1", 50000)) as c:
         yield c
 

@@ -22,12 +22,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import LAT0, LON0, REPO, make_settings, synthetic_features, write_geojson
-from engine.store.store import CCSStore
 from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
 from app.cli import _register_commands, app
 from app.main import create_app
+from engine.store.store import CCSStore
 
 pytestmark = pytest.mark.slow
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.render_jobs import MorphJob, RenderConfig, TileJob, Worker, run_job
+from app.render.jobs import MorphJob, RenderConfig, TileJob, Worker, run_job
 from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import TileOptions
 from engine.store.store import CCSStore

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pytest
 
-from app.security import LOOPBACK_NAMES, host_name
+from app.routes.security import LOOPBACK_NAMES, host_name
 from tests.app.test_upload_ownership import BODY, GEOJSON, _client
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-import app.responses
+import app.http.responses
 from tests.app.conftest import LAT0, LON0
 from tests.app.helpers import check_tile, tile_for
 
@@ -19,7 +19,7 @@ def loop_cannot_gzip(client, monkeypatch):
     def refuse(body: bytes) -> bytes:
         raise AssertionError("the server process compressed a rendered body")
 
-    monkeypatch.setattr(app.responses, "gzip_body", refuse)
+    monkeypatch.setattr(app.http.responses, "gzip_body", refuse)
     return client
 
 

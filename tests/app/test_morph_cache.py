@@ -2,7 +2,7 @@
 
 The crossing check (engine/tiles/morph_untangle.py) is the slow part of a morph tile, and its answer depends
 only on the dataset's data version and the tile, so a morph worker keeps the tiles it drew
-(``CCSM_MORPH_CACHE_MB``, app/render_jobs.py). Here a worker state on a real store draws the same tile twice
+(``CCSM_MORPH_CACHE_MB``, app/render/jobs.py). Here a worker state on a real store draws the same tile twice
 (one check), then the dataset is rebuilt with other contours (a new data version): the tile is checked and
 drawn again, and it is the new data's tile.
 """
@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 import engine.serve.renderer as renderer_module
-from app.render_jobs import MorphJob, RenderConfig, Worker, run_job
+from app.render.jobs import MorphJob, RenderConfig, Worker, run_job
 from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import TileOptions
 from engine.store.store import CCSStore

@@ -1,7 +1,7 @@
 """Issue 10: a plain tile never waits behind a morph tile (a real server on loopback).
 
 Morph tiles run their crossing check per tile, up to half a second on a dense tile, so they have a lane of
-their own (``CCSM_MORPH_RENDER_WORKERS``, app/render_pool.py). Here the one morph worker is stopped
+their own (``CCSM_MORPH_RENDER_WORKERS``, app/render/pool.py). Here the one morph worker is stopped
 (SIGSTOP) in the middle of a morph request, the slowest morph tile there can be: the morph request waits, a
 plain tile is answered meanwhile, and the morph request is answered once its worker goes on.
 

@@ -1,6 +1,6 @@
 """Issue 10: a render worker's first morph tile compiles nothing (the fork server's warm-up covered it).
 
-Render workers are forked from a fork server that ran ``engine.warmup.warm_up`` (app/render_preload.py). A
+Render workers are forked from a fork server that ran ``engine.warmup.warm_up`` (app/render/preload.py). A
 kernel the warm-up misses is compiled by the first request that needs it, in every fresh worker: seconds
 inside that request, with its worker held meanwhile. Here a fresh interpreter warms up, then draws morph
 tiles of a real store, and reports every numba kernel that gained a compiled signature while it drew them.

@@ -1,4 +1,4 @@
-"""A request cancelled while its job is in a render worker (its client hung up, app/disconnect.py): a job that
+"""A request cancelled while its job is in a render worker (its client hung up, app/http/disconnect.py): a job that
 ends within the grace gives its worker back, so a client that asks and hangs up cannot make the pool kill and
 respawn workers (docs/service.md, "Under load"). The pool is real: worker processes drawing from a real store.
 """
@@ -8,8 +8,8 @@ from __future__ import annotations
 import asyncio
 from pathlib import Path
 
-from app.render_jobs import TileJob
-from app.render_pool import RenderPool, render_config_for
+from app.render.jobs import TileJob
+from app.render.pool import RenderPool, render_config_for
 from app.settings import Settings
 from tests.app.conftest import LAT0, LON0
 from tests.app.helpers import tile_for

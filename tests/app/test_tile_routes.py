@@ -56,6 +56,15 @@ def test_etag_304(client):
     assert other.status_code == 200
 
 
+def test_etag_names_t_only_for_a_method_that_honours_it(client):
+    """A pinned t changes a ccsm tile, so its ETag; a baseline ignores t, so one cached tile serves every t."""
+    path = url(*tile_for(LON0, LAT0, 12))
+    ccsm = [client.get(path + f"?method=ccsm&t={t}").headers["etag"] for t in (0.2, 0.8)]
+    dp = [client.get(path + f"?method=dp&t={t}").headers["etag"] for t in (0.2, 0.8)]
+    assert ccsm[0] != ccsm[1]
+    assert dp[0] == dp[1]
+
+
 def test_etag_changes_with_the_data_version(client, tmp_path):
     path = url(*tile_for(LON0, LAT0, 12))
     old = client.get(path)

@@ -24,9 +24,10 @@ from typing import Any
 
 from starlette.requests import Request
 
-from app.render_jobs import HEAVY_NICENESS, LIGHT_NICENESS, MORPH_NICENESS, Job, RenderConfig, Rendered, worker_main
+from app.render.jobs import HEAVY_NICENESS, LIGHT_NICENESS, MORPH_NICENESS, Job, RenderConfig, Rendered, worker_main
 from app.settings import Settings
 from engine.errors import CCSMError
+from engine.serve.methods import Method
 
 log = logging.getLogger("ccsm.render")
 
@@ -61,7 +62,7 @@ class Worker:
 
 
 class RenderPool:
-    """Runs :mod:`app.render_jobs` jobs in worker processes, each request within its deadline.
+    """Runs :mod:`app.render.jobs` jobs in worker processes, each request within its deadline.
 
     Parameters
     ----------
@@ -74,7 +75,7 @@ class RenderPool:
     timeout_s
         Deadline of a request, seconds from :meth:`run` to its answer.
     niceness
-        Niceness the workers add to the server's (app.render_jobs: LIGHT_NICENESS, HEAVY_NICENESS).
+        Niceness the workers add to the server's (app.render.jobs: LIGHT_NICENESS, HEAVY_NICENESS).
     """
 
     def __init__(
@@ -88,8 +89,8 @@ class RenderPool:
         # Never fork the server (it runs threads): a fork server, started clean once per server process with
         # the engine imported, forks each worker, so a replacement is ready in well under a second.
         self._ctx = multiprocessing.get_context("forkserver")
-        # (The upload checks of app/uploads.py are forked from the same server.)
-        self._ctx.set_forkserver_preload(["app.render_jobs", "app.render_preload", "app.upload_check"])
+        # (The upload checks of app/datasets/uploads.py are forked from the same server.)
+        self._ctx.set_forkserver_preload(["app.render.jobs", "app.render.preload", "app.datasets.upload_check"])
         # Threads that wait on pipes and start processes, so the event loop never blocks on either.
         self._threads = ThreadPoolExecutor(max_workers=2 * size + 2, thread_name_prefix="ccsm-render")
         self._idle: asyncio.Queue[Worker] = asyncio.Queue()
@@ -198,7 +199,7 @@ class RenderPool:
         exchange = loop.run_in_executor(self._threads, _exchange, worker.conn, job, deadline - time.monotonic())
         try:
             status, value = await asyncio.shield(exchange)
-        except asyncio.CancelledError:  # the client went away (app/disconnect.py): stop the work, cheaply
+        except asyncio.CancelledError:  # the client went away (app/http/disconnect.py): stop the work, cheaply
             self._settle_soon(worker, exchange)
             raise
         except _Late:
@@ -279,11 +280,6 @@ def _log_failure(task: asyncio.Task[None]) -> None:
         log.error("starting a render worker failed", exc_info=task.exception())
 
 
-#: Methods whose tiles go to the heavy lane: simplifiers run per request on whole contours (pure Python,
-#: Wang–Müller super-linear), where a ccsm or original tile only slices stored rows.
-HEAVY_METHODS = frozenset({"dp", "wm", "vw"})
-
-
 @dataclass
 class RenderLanes:
     """Three pools, so slow requests cannot hold up quick ones: ``light`` draws ccsm and original tiles
@@ -296,9 +292,11 @@ class RenderLanes:
     heavy: RenderPool
     morph: RenderPool
 
-    def for_tile(self, method: str) -> RenderPool:
-        """The lane of a tile drawn with ``method``."""
-        return self.heavy if method in HEAVY_METHODS else self.light
+    def for_tile(self, method: Method) -> RenderPool:
+        """The lane of a tile drawn with ``method``: the heavy one for a method that simplifies whole contours
+        on each request (pure Python, Wang–Müller super-linear), where a ccsm or original tile only cuts
+        stored rows."""
+        return self.heavy if method.simplifies_per_request else self.light
 
     def all(self) -> tuple[RenderPool, ...]:
         """Every lane."""

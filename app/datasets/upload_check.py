@@ -2,7 +2,7 @@
 
 The server never parses an upload itself (docs/service.md, "Uploads"): parsing a 20 MB document holds the
 interpreter for seconds and takes hundreds of MB, which would stall the event loop (``/healthz`` included)
-and keep the server's memory high. :mod:`app.uploads` runs :func:`check_upload` in a short-lived child
+and keep the server's memory high. :mod:`app.datasets.uploads` runs :func:`check_upload` in a short-lived child
 process per upload and awaits its answer. This module imports no web framework, and the fork server that
 forks those processes imports it (with the readers) beforehand, so a check starts in milliseconds.
 """
@@ -17,7 +17,8 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
-from app.render_jobs import HEAVY_NICENESS, lower_priority
+from app.errors import MalformedUpload
+from app.render.jobs import HEAVY_NICENESS, lower_priority
 from engine.cartography.options import CartographyOptions, check_schedule_fits
 from engine.errors import CCSMError
 from engine.io.source import read_source
@@ -26,10 +27,6 @@ from engine.serve.datasets import source_hash
 
 #: Bad features listed in the answer to an upload (all of them are in GET /datasets/{id} once built).
 BAD_FEATURES_SHOWN = 20
-
-
-class MalformedUpload(CCSMError):
-    """An upload is not a GeoJSON FeatureCollection of contour lines."""
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """What a render worker process does: open the store read-only, draw tiles, hillshade tiles and /simplify
 answers.
 
-This module runs inside the worker processes of :mod:`app.render_pool` (docs/service.md, "Under load").
+This module runs inside the worker processes of :mod:`app.render.pool` (docs/service.md, "Under load").
 It imports no web framework: a job is a plain tuple in, bytes (or an engine error) out.
 """
 
@@ -16,7 +16,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
-from app.compression import gzip_body, worth_compressing
+from app.http.compression import gzip_body, worth_compressing
 from engine.errors import CCSMError, UnknownLayer
 from engine.parallel import lower_priority as lower_process_priority
 from engine.serve.cache import LRUCache

@@ -11,9 +11,7 @@ from app.service import DatasetService
 from app.settings import Settings
 from app.store_follow import follow_store
 from engine.errors import StoreNotReady
-from engine.types import Method
-
-MethodName = Method
+from engine.method_names import MethodName
 
 
 def get_service(request: Request) -> DatasetService:

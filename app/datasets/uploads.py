@@ -4,7 +4,7 @@ process of its own.
 - :func:`receive_upload` writes the request body to a file of the upload folder as it arrives, a bounded
   buffer at a time, and refuses it (413) as soon as it passes the limit; the server never holds a whole
   upload in memory, and the writes run in a thread.
-- :class:`UploadChecker` parses and checks that file in a short-lived child process (:mod:`app.upload_check`),
+- :class:`UploadChecker` parses and checks that file in a short-lived child process (:mod:`app.datasets.upload_check`),
   ``size`` at a time with ``queue`` more waiting (one more gets 429), each within a deadline. The server
   awaits the answer, so the event loop never parses, and the memory a parse takes returns to the system
   when its process ends. Bad input still gets its 4xx before anything is kept.
@@ -27,9 +27,9 @@ from typing import IO, Any
 from fastapi.concurrency import run_in_threadpool
 from starlette.requests import Request
 
+from app.datasets.upload_check import CheckedUpload, UploadCheck, checker_main
 from app.errors import UploadCheckFailed, UploadQueueFull, UploadTooLarge
 from app.settings import Settings
-from app.upload_check import CheckedUpload, UploadCheck, checker_main
 from engine.errors import StoreUnwritable
 from engine.store.connection import unwritable_reason
 
@@ -104,7 +104,7 @@ async def _copy_body(request: Request, fh: IO[bytes], limit: int) -> None:
 
 
 class UploadChecker:
-    """Runs :func:`app.upload_check.check_upload` in child processes, ``size`` at a time.
+    """Runs :func:`app.datasets.upload_check.check_upload` in child processes, ``size`` at a time.
 
     Parameters
     ----------

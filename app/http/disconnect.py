@@ -3,8 +3,8 @@
 The server does not cancel a request handler whose client went away: a render or an upload check would run
 on for nobody (a check would even reserve an id and queue a build). :func:`unless_client_goes` awaits the
 work and watches the connection meanwhile; once the request's body has been read, the only message the
-request can still receive is ``http.disconnect``. Cancelling the work kills its process (app.render_pool,
-app.uploads), so the work really stops.
+request can still receive is ``http.disconnect``. Cancelling the work kills its process (app.render.pool,
+app.datasets.uploads), so the work really stops.
 """
 
 from __future__ import annotations

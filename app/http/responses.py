@@ -6,7 +6,7 @@ import hashlib
 
 from fastapi import Request, Response
 
-from app.compression import gzip_body, worth_compressing
+from app.http.compression import gzip_body, worth_compressing
 
 
 def make_etag(*parts: object) -> str:

@@ -18,8 +18,8 @@ from typing import Annotated
 
 from fastapi import Depends, Request
 
-from app.dependencies import get_settings
 from app.errors import NotAuthenticated, UnsupportedMediaType, WriteForbidden
+from app.routes.dependencies import get_settings
 from app.settings import Settings
 
 #: Media types a write body may have (neither can be sent cross-site without a preflight).

@@ -12,7 +12,7 @@ from starlette.requests import Request
 from starlette.responses import JSONResponse
 from starlette.types import Receive, Scope, Send
 
-from app.errors import error_body
+from app.http.errors import error_body
 
 
 class JsonCORSMiddleware(CORSMiddleware):
