@@ -22,12 +22,12 @@ from app.errors import BuildQueueFull, DatasetExists, log_safe
 from app.settings import Settings
 from app.upload_check import CheckedUpload
 from app.uploads import INCOMING_PREFIX
+from engine.build.datasets import RELIEF_DEM_KEY, SourceSpec, build_lock, slugify, source_hash
+from engine.build.job import BuildJob
 from engine.cartography.options import PARAMS_KEY as CARTOGRAPHY_KEY
 from engine.cartography.options import CartographyOptions
 from engine.errors import CCSMError, StoreError, StoreNotReady, StoreUnwritable, UnknownLayer
 from engine.scratch import pid_alive
-from engine.serve.build_job import BuildJob
-from engine.serve.datasets import RELIEF_DEM_KEY, SourceSpec, build_lock, slugify, source_hash
 from engine.serve.renderer import Renderer, TileOptions
 from engine.store.sqlite import CCSStore, DatasetInfo
 from engine.tiles.grid import mercator_to_lonlat

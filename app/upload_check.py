@@ -18,11 +18,11 @@ from pathlib import Path
 from typing import Any
 
 from app.render_jobs import HEAVY_NICENESS, lower_priority
+from engine.build.datasets import source_hash
 from engine.cartography.options import CartographyOptions, check_schedule_fits
 from engine.errors import CCSMError
 from engine.io.source import read_source
 from engine.io.vector import elevation_units
-from engine.serve.datasets import source_hash
 
 #: Bad features listed in the answer to an upload (all of them are in GET /datasets/{id} once built).
 BAD_FEATURES_SHOWN = 20

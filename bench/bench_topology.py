@@ -37,10 +37,10 @@ import numpy as np
 import engine.serve.renderer as renderer_module
 from engine import BuildParams, build_contour_set, read_source, sample_contours_path
 from engine.baselines import simplify_at_scale
+from engine.build.datasets import SourceSpec, build_dataset
 from engine.ccsm.regression import t_for_scale
 from engine.ccsm.topology import INPUT_TOUCH_M, crossing_pairs, proper_crossing_pairs
 from engine.geom.polyline import closed_path
-from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import Renderer, TileOptions
 from engine.serve.simplify import simplify
 from engine.store.sqlite import CCSStore

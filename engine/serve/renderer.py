@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from engine.build.labels import DEFAULT_MAX_ZOOM, label_anchors, label_last_zoom, place_dataset_labels
 from engine.cartography.dataset import DatasetCartography, dataset_cartography, label_columns
 from engine.cartography.labels import LabelAnchors
 from engine.ccsm.regression import t_at_scales
@@ -28,7 +29,6 @@ from engine.checks import check_method, check_t
 from engine.intervals import infer_interval
 from engine.serve.cache import LRUCache
 from engine.serve.heads import DEFAULT_HEAD_CACHE_BYTES, DatasetHeads, head_bytes
-from engine.serve.labels import DEFAULT_MAX_ZOOM, label_anchors, label_last_zoom, place_dataset_labels
 from engine.serve.methods import Method, TileContext, TileLines, make_methods
 from engine.serve.pack import PACK_BYTES_PER_VERTEX, DatasetPack
 from engine.serve.pieces import pack_of_pieces

@@ -7,7 +7,7 @@ import pytest
 import shapely
 
 from engine.baselines import simplify_at_scale
-from engine.serve.datasets import SourceSpec, build_dataset
+from engine.build.datasets import SourceSpec, build_dataset
 from engine.store.sqlite import CCSStore
 from engine.tiles.scale import zoom_for_scale
 from tests.app.conftest import LAT0, LON0, synthetic_features, write_geojson
