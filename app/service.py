@@ -23,12 +23,12 @@ from app.datasets.uploads import INCOMING_PREFIX
 from app.errors import BuildQueueFull, DatasetExists
 from app.http.errors import log_safe
 from app.settings import Settings
+from engine.build.datasets import RELIEF_DEM_KEY, SourceSpec, build_lock, slugify, source_hash
+from engine.build.job import BuildJob
 from engine.cartography.options import PARAMS_KEY as CARTOGRAPHY_KEY
 from engine.cartography.options import CartographyOptions
 from engine.errors import CCSMError, StoreError, StoreNotReady, StoreUnwritable, UnknownLayer
 from engine.scratch import pid_alive
-from engine.serve.build_job import BuildJob
-from engine.serve.datasets import RELIEF_DEM_KEY, SourceSpec, build_lock, slugify, source_hash
 from engine.serve.renderer import Renderer, TileOptions
 from engine.store.records import DatasetInfo
 from engine.store.store import CCSStore

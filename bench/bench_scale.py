@@ -118,9 +118,9 @@ def build_one(path: Path, interval: float, workers: int, cache_mb: float | None 
     The phases are timed by wrapping the functions that do them (nothing else changes); the peak memory is read
     right after the build, before the tiles are timed (the renderer then loads the whole dataset to serve it).
     """
+    import engine.build.datasets as datasets_module
     import engine.ccsm.build as build_module
-    import engine.serve.datasets as datasets_module
-    from engine.serve.datasets import SourceSpec, build_dataset
+    from engine.build.datasets import SourceSpec, build_dataset
     from engine.store.store import CCSStore
 
     phase_s = {"read": 0.0, "repair": 0.0, "write": 0.0}

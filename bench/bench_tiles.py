@@ -30,9 +30,9 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from engine.build.datasets import save_built  # noqa: E402
 from engine.ccsm.build import build_contour_set  # noqa: E402
 from engine.io.source import read_source, sample_contours_path  # noqa: E402
-from engine.serve.datasets import save_built  # noqa: E402
 from engine.serve.renderer import Renderer  # noqa: E402
 from engine.store.store import CCSStore  # noqa: E402
 from engine.tiles.grid import tiles_covering  # noqa: E402

@@ -34,13 +34,13 @@ from pathlib import Path
 import mapbox_vector_tile
 import numpy as np
 
-import engine.serve.renderer as renderer_module
+import engine.serve.morph_tiles as morph_module
 from engine import BuildParams, build_contour_set, read_source, sample_contours_path
 from engine.baselines import simplify_at_scale
+from engine.build.datasets import SourceSpec, build_dataset
 from engine.ccsm.regression import t_for_scale
 from engine.ccsm.topology import INPUT_TOUCH_M, crossing_pairs, proper_crossing_pairs
 from engine.geom.polyline import closed_path
-from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import Renderer, TileOptions
 from engine.serve.simplify import simplify
 from engine.store.store import CCSStore
@@ -175,7 +175,7 @@ class HeldCount:
 
     def __init__(self) -> None:
         self.per_tile: list[int] = []
-        self.untangle = renderer_module.untangle
+        self.untangle = morph_module.untangle
 
     def __enter__(self) -> HeldCount:
         def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
@@ -183,11 +183,11 @@ class HeldCount:
             self.per_tile.append(held)
             return parts, held
 
-        renderer_module.untangle = counted
+        morph_module.untangle = counted
         return self
 
     def __exit__(self, *exc: object) -> None:
-        renderer_module.untangle = self.untangle
+        morph_module.untangle = self.untangle
 
 
 def render_times(source: Path, zooms: range, morph_only: bool = False) -> None:

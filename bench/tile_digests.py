@@ -19,8 +19,8 @@ sys.path.insert(0, str(REPO))
 
 
 def main() -> None:
+    from engine.build.datasets import SourceSpec, build_dataset
     from engine.io.source import sample_contours_path
-    from engine.serve.datasets import SourceSpec, build_dataset
     from engine.serve.renderer import Renderer
     from engine.store.store import CCSStore
     from engine.tiles.grid import tiles_covering

@@ -35,6 +35,8 @@ PHASES = ("info", "query", "heads", "pieces sql", "pieces decode", "join", "pack
 
 def instrument(spent: dict[str, float]) -> None:
     """Wrap the functions of each phase so their time adds up in ``spent`` (innermost phase wins)."""
+    import engine.serve.cutters as cutters
+    import engine.serve.label_layer as label_layer
     import engine.serve.methods as methods
     import engine.serve.pack as pack
     import engine.serve.pieces as pieces
@@ -86,9 +88,9 @@ def instrument(spent: dict[str, float]) -> None:
         cls = getattr(methods, m, None)
         if cls is not None:
             cls.tile_lines = timed("lines", cls.tile_lines)
-    renderer.Renderer.cut = timed("cut", renderer.Renderer.cut)  # type: ignore[method-assign]
+    cutters.TileCutter.cut = timed("cut", cutters.TileCutter.cut)  # type: ignore[method-assign]
     renderer.encode_line_tile = timed("encode", renderer.encode_line_tile)
-    renderer.Renderer.label_layer = timed("labels", renderer.Renderer.label_layer)  # type: ignore[method-assign]
+    label_layer.LabelLayer.layer = timed("labels", label_layer.LabelLayer.layer)  # type: ignore[method-assign]
 
 
 def chosen_tiles(store: Any, n: int) -> tuple[str, list[tuple[int, int, int]]]:

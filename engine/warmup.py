@@ -78,9 +78,9 @@ def _render_one_tile(ring: np.ndarray, line: np.ndarray) -> None:
     import tempfile
     from pathlib import Path
 
+    from engine.build.datasets import save_built
     from engine.ccsm.build import build_contour_set
     from engine.params import BuildParams
-    from engine.serve.datasets import save_built
     from engine.serve.renderer import Renderer
     from engine.store.store import CCSStore
     from engine.tiles.grid import tiles_covering

@@ -274,7 +274,7 @@ def build_into_cache(
     The dataset id is ``src-`` and the hash's first 16 hex digits, so another scale or method of the same
     source, or an export of it, reuses the build.
     """
-    from engine.serve.datasets import SourceSpec, build_dataset, source_hash
+    from engine.build.datasets import SourceSpec, build_dataset, source_hash
 
     spec = SourceSpec(
         path=source.resolve(),

@@ -151,8 +151,8 @@ def build(
 
     from app.service import SAMPLE_ID, SAMPLE_NAME, build_lock
     from app.settings import Settings
+    from engine.build.datasets import SourceSpec, build_dataset, slugify
     from engine.errors import CCSMError
-    from engine.serve.datasets import SourceSpec, build_dataset, slugify
     from engine.store.store import CCSStore
 
     console = Console(stderr=True)

@@ -1,6 +1,6 @@
 """Builds in processes of their own, a bounded number at a time, the rest queued (docs/service.md, "Builds").
 
-Each build is ``python -m engine.serve.build_job`` in a new session (its own process group), so
+Each build is ``python -m engine.build.job`` in a new session (its own process group), so
 
 - the memory a build takes goes back to the system when it ends (the server stays near its baseline);
 - deleting a dataset stops its build by ending the group (the build's own worker processes included);
@@ -22,7 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from app.errors import BuildQueueFull
-from engine.serve.build_job import BuildJob
+from engine.build.job import BuildJob
 
 log = logging.getLogger("ccsm.builds")
 
@@ -70,7 +70,7 @@ class BuildRunner:
 
     def _start(self, job: BuildJob) -> None:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "engine.serve.build_job"],
+            [sys.executable, "-m", "engine.build.job"],
             stdin=subprocess.PIPE,
             start_new_session=True,  # its own process group: ended as a whole on delete and shutdown
             close_fds=True,

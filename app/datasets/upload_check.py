@@ -19,11 +19,11 @@ from typing import Any
 
 from app.errors import MalformedUpload
 from app.render.jobs import HEAVY_NICENESS, lower_priority
+from engine.build.datasets import source_hash
 from engine.cartography.options import CartographyOptions, check_schedule_fits
 from engine.errors import CCSMError
 from engine.io.source import read_source
 from engine.io.vertical_units import elevation_units
-from engine.serve.datasets import source_hash
 
 #: Bad features listed in the answer to an upload (all of them are in GET /datasets/{id} once built).
 BAD_FEATURES_SHOWN = 20

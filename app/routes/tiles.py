@@ -18,7 +18,8 @@ from app.routes.dependencies import TileQuery, get_service, get_settings
 from app.service import DatasetService, lonlat_bounds
 from app.settings import Settings
 from engine.cartography.dataset import contour_fields, label_fields
-from engine.serve.renderer import LABEL_LAYER, MORPH_END_LAYER, MORPH_START_LAYER, MORPH_T_SAMPLES
+from engine.serve.label_layer import LABEL_LAYER
+from engine.serve.morph_tiles import MORPH_END_LAYER, MORPH_START_LAYER, MORPH_T_SAMPLES
 from engine.tiles.grid import check_tile
 from engine.tiles.scale import zoom_for_scale
 

@@ -10,13 +10,17 @@ from numba import njit
 
 
 @njit(cache=True)
-def dp_significance(xy: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
-    """Douglas–Peucker significance of every vertex of an open polyline.
+def dp_significance(xy: np.ndarray, zw: np.ndarray | None = None) -> np.ndarray:  # pragma: no cover - compiled
+    """Douglas–Peucker significance of every vertex of an open polyline: (n, 2) ``xy``, or the 4-D polyline
+    ``(xy, zw)`` when ``zw`` (n, 2) is given.
 
     ``sig[i]`` is the largest tolerance at which Douglas–Peucker keeps vertex ``i``: the distance of ``i`` to
     the chord of the segment it splits, capped by the significance of every ancestor split (DP only looks
     inside a segment that was itself split). The two end points get ``inf``. DP at tolerance ``eps`` keeps
     exactly the vertices with ``sig > eps``.
+
+    The 4-D form is what tiles thin CCS rows by (:mod:`engine.tiles.significance`): one chord parameter for both
+    pairs. ``zw`` None compiles away (numba prunes the branches), so the plane keeps its own fast loop.
     """
     n = xy.shape[0]
     sig = np.zeros(n)
@@ -27,11 +31,11 @@ def dp_significance(xy: np.ndarray) -> np.ndarray:  # pragma: no cover - compile
     stack_first = np.empty(n, np.int64)
     stack_last = np.empty(n, np.int64)
     stack_cap = np.empty(n)
-    top = 0
     stack_first[0] = 0
     stack_last[0] = n - 1
     stack_cap[0] = np.inf
     top = 1
+    az = aw = dz = dw = 0.0
     while top > 0:
         top -= 1
         first = stack_first[top]
@@ -44,24 +48,43 @@ def dp_significance(xy: np.ndarray) -> np.ndarray:  # pragma: no cover - compile
         dx = xy[last, 0] - ax
         dy = xy[last, 1] - ay
         seg2 = dx * dx + dy * dy
+        if zw is not None:
+            az = zw[first, 0]
+            aw = zw[first, 1]
+            dz = zw[last, 0] - az
+            dw = zw[last, 1] - aw
+            # Summed one term at a time, in coordinate order, so every sum rounds as it always has.
+            seg2 += dz * dz
+            seg2 += dw * dw
         best = -1.0
         best_i = first + 1
         for i in range(first + 1, last):
             px = xy[i, 0] - ax
             py = xy[i, 1] - ay
+            pz = pw = 0.0
+            if zw is not None:
+                pz = zw[i, 0] - az
+                pw = zw[i, 1] - aw
             # Distance to the chord as a segment, so a vertex beyond an end still counts.
+            u = 0.0
             if seg2 > 0.0:
-                u = (px * dx + py * dy) / seg2
+                u = px * dx + py * dy
+                if zw is not None:
+                    u += pz * dz
+                    u += pw * dw
+                u /= seg2
                 if u < 0.0:
                     u = 0.0
                 elif u > 1.0:
                     u = 1.0
-                qx = px - u * dx
-                qy = py - u * dy
-            else:
-                qx = px
-                qy = py
+            qx = px - u * dx
+            qy = py - u * dy
             d = qx * qx + qy * qy
+            if zw is not None:
+                qz = pz - u * dz
+                qw = pw - u * dw
+                d += qz * qz
+                d += qw * qw
             if d > best:
                 best = d
                 best_i = i

@@ -1,1 +1,1 @@
-"""Serving built datasets: records, packs, one renderer per generalization method, caches, dataset builds."""
+"""Serving built datasets: packs, one renderer per generalization method, caches, relief, static export."""

@@ -26,14 +26,10 @@ import numpy as np
 from engine.cartography.dataset import DatasetCartography, contour_fields, label_fields
 from engine.ccsm.build import default_workers
 from engine.errors import InvalidParameter, StoreError
-from engine.serve.renderer import (
-    LABEL_LAYER,
-    MORPH_END_LAYER,
-    MORPH_START_LAYER,
-    MORPH_T_SAMPLES,
-    Renderer,
-    TileOptions,
-)
+from engine.serve.label_layer import LABEL_LAYER
+from engine.serve.morph_tiles import MORPH_END_LAYER, MORPH_START_LAYER, MORPH_T_SAMPLES
+from engine.serve.renderer import Renderer
+from engine.serve.tile_request import TileOptions
 from engine.store.records import DatasetInfo
 from engine.store.store import CCSStore
 from engine.tiles.archives import ArchiveMeta, archive_format, open_archive, tile_id

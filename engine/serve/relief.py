@@ -5,9 +5,9 @@ from __future__ import annotations
 import threading
 from pathlib import Path
 
+from engine.build.datasets import RELIEF_DEM_KEY
 from engine.io.crs import crs_to_string
 from engine.io.dem import read_dem
-from engine.serve.datasets import RELIEF_DEM_KEY
 from engine.store.records import DatasetInfo
 from engine.tiles.hillshade import ShadedRelief, shade_relief
 

@@ -12,7 +12,8 @@ import numpy as np
 from engine.ccsm.regression import t_at_scales
 from engine.checks import check_bbox, check_method, check_scale
 from engine.io.crs import WEB_MERCATOR, make_transformer
-from engine.serve.renderer import T_DECIMALS, Renderer
+from engine.serve.feature_columns import T_DECIMALS
+from engine.serve.renderer import Renderer
 from engine.tiles.grid import lonlat_to_mercator, mercator_to_lonlat
 from engine.types import Coords
 

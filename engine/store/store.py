@@ -1,6 +1,6 @@
 """The store: precomputed CCS rows, Sim(t) and t(scale) tables and dataset metadata in one SQLite file.
 
-Persistence only: the rows arrive ready (reprojected, with their significance; :mod:`engine.serve.records`)
+Persistence only: the rows arrive ready (reprojected, with their significance; :mod:`engine.build.records`)
 and leave decoded; what they mean is the serving layer's business.
 
 - Contour extents sit in an R*Tree (EPSG:3857), so a tile looks up only the contours it touches.

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from app.render.jobs import MorphJob, RenderConfig, TileJob, Worker, run_job
-from engine.serve.datasets import SourceSpec, build_dataset
+from engine.build.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import TileOptions
 from engine.store.store import CCSStore
 from tests.app.conftest import LAT0, LON0, synthetic_features, write_geojson

@@ -24,7 +24,7 @@ import numpy as np
 import psutil
 import pytest
 
-from engine.serve.datasets import SourceSpec, build_dataset
+from engine.build.datasets import SourceSpec, build_dataset
 from engine.store.store import CCSStore
 from tests.app.conftest import LAT0, LON0, LiveServer
 from tests.app.helpers import tile_for

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pytest
 
-import engine.serve.renderer as renderer_module
+import engine.serve.morph_tiles as morph_module
 from app.render.jobs import MorphJob, RenderConfig, Worker, run_job
-from engine.serve.datasets import SourceSpec, build_dataset
+from engine.build.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import TileOptions
 from engine.store.store import CCSStore
 from tests.app.conftest import LAT0, LON0, synthetic_features, write_geojson
@@ -26,13 +26,13 @@ from tests.app.helpers import tile_for
 def checks(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     """Counts the morph crossing checks the renderer runs (one entry per check of a tile)."""
     calls: list[int] = []
-    check = renderer_module.untangle
+    check = morph_module.untangle
 
     def counted(*args, **kwargs):
         calls.append(1)
         return check(*args, **kwargs)
 
-    monkeypatch.setattr(renderer_module, "untangle", counted)
+    monkeypatch.setattr(morph_module, "untangle", counted)
     return calls
 
 

@@ -8,7 +8,7 @@ import shapely
 from support.mvt import decode
 
 from engine.baselines import simplify_at_scale
-from engine.serve.datasets import SourceSpec, build_dataset
+from engine.build.datasets import SourceSpec, build_dataset
 from engine.store.store import CCSStore
 from engine.tiles.scale import zoom_for_scale
 from tests.app.conftest import LAT0, LON0, synthetic_features, write_geojson

@@ -14,8 +14,8 @@ from pmtiles.reader import MmapSource, Reader, all_tiles
 from pmtiles.tile import Compression, TileType, zxy_to_tileid
 
 import engine.serve.export as export_mod
+from engine.build.datasets import SourceSpec, build_dataset
 from engine.errors import InvalidParameter, StoreError, UnknownLayer
-from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.export import check_zoom_range, export_dataset, pyramid
 from engine.serve.renderer import Renderer
 from engine.store.records import DatasetInfo

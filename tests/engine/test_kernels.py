@@ -16,7 +16,7 @@ HYPOTHESIS = settings(deadline=None, max_examples=80)
 
 
 def reference_significance(xy: np.ndarray) -> list[float]:
-    """Largest tolerance at which plain recursive DP keeps each vertex (inf for the ends)."""
+    """Largest tolerance at which plain recursive DP keeps each vertex (inf for the ends), in any dimension."""
     n = len(xy)
     sig = [0.0] * n
     sig[0] = sig[-1] = math.inf
@@ -30,7 +30,7 @@ def reference_significance(xy: np.ndarray) -> list[float]:
             seg = b - a
             seg2 = float(seg @ seg)
             u = min(1.0, max(0.0, float((xy[i] - a) @ seg) / seg2)) if seg2 > 0 else 0.0
-            d = float(np.hypot(*(xy[i] - a - u * seg)))
+            d = float(np.sqrt(np.sum((xy[i] - a - u * seg) ** 2)))
             if d > best:
                 best, best_i = d, i
         s = min(best, cap)
@@ -103,6 +103,16 @@ def test_frechet_kernel_on_a_hand_worked_pair() -> None:
 def test_dp_significance_equals_the_recursive_reference(seed: int, n: int) -> None:
     xy = np.cumsum(np.random.default_rng(seed).normal(0.0, 10.0, (n, 2)), axis=0)
     np.testing.assert_allclose(dp_significance(xy), reference_significance(xy), rtol=1e-12, atol=1e-12)
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(2, 30))
+@settings(deadline=None, max_examples=60)
+def test_dp_significance_of_two_coordinate_pairs_is_that_of_the_4d_line(seed: int, n: int) -> None:
+    rng = np.random.default_rng(seed)
+    xy = np.cumsum(rng.normal(0.0, 10.0, (n, 2)), axis=0)
+    zw = np.cumsum(rng.normal(0.0, 30.0, (n, 2)), axis=0)
+    expected = reference_significance(np.concatenate([xy, zw], axis=1))
+    np.testing.assert_allclose(dp_significance(xy, zw), expected, rtol=1e-12, atol=1e-12)
 
 
 def test_dp_significance_of_a_two_point_line_is_inf_at_both_ends() -> None:

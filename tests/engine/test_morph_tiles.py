@@ -16,8 +16,8 @@ import shapely
 from support.mvt import decode, decode_served
 from synthetic_rasters import fractal_heights, write_geotiff
 
+from engine.build.datasets import SourceSpec, build_dataset
 from engine.io.source import sample_contours_path
-from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import Renderer, TileOptions
 from engine.store.store import CCSStore
 from engine.tiles.grid import tiles_covering

@@ -23,8 +23,8 @@ from real_dems import write_maunga_whau_contours, write_topobathy_contours
 from support.mvt import decode_served
 from synthetic_rasters import fractal_heights, write_exact_level_geojson
 
+from engine.build.datasets import SourceSpec, build_dataset
 from engine.ccsm.topology import INPUT_TOUCH_M, crossing_pairs
-from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import Renderer
 from engine.serve.simplify import simplify
 from engine.store.store import CCSStore

@@ -5,9 +5,9 @@ import sqlite3
 import numpy as np
 import pytest
 
+from engine.build.datasets import SourceSpec, build_dataset, source_hash
 from engine.errors import StoreError, UnknownLayer
 from engine.io.source import read_source
-from engine.serve.datasets import SourceSpec, build_dataset, source_hash
 from engine.store.store import CCSStore
 from tests.app.conftest import synthetic_features, write_geojson
 
@@ -63,7 +63,7 @@ def test_failed_write_rolls_back(store, src, monkeypatch):
     before = store.dataset("h")
     fids = store.all_fids("h")
     recs = store.load(fids)
-    import engine.serve.datasets as datasets
+    import engine.build.datasets as datasets
 
     real_rows = datasets.contour_rows
 
@@ -200,7 +200,7 @@ def test_issue_10_quick_check_finds_flipped_bytes(store, tmp_path):
 
 
 def test_issue_12_rows_written_batch_by_batch_make_the_same_dataset(store, src, monkeypatch):
-    import engine.serve.datasets as datasets
+    import engine.build.datasets as datasets
 
     whole = store.dataset("h")
     rows = store.load(store.all_fids("h"))
@@ -220,7 +220,7 @@ def test_issue_12_rows_written_batch_by_batch_make_the_same_dataset(store, src, 
 
 
 def test_issue_12_a_build_failing_in_its_second_batch_leaves_the_stored_version(store, src, monkeypatch):
-    import engine.serve.datasets as datasets
+    import engine.build.datasets as datasets
 
     before = store.dataset("h")
     fids = store.all_fids("h")

@@ -8,13 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import engine.serve.labels as serve_labels
+import engine.build.labels as build_labels
+from engine.build.datasets import SourceSpec, build_dataset
 from engine.cartography.dataset import dataset_cartography, label_sources
 from engine.cartography.labels import place_labels
 from engine.errors import StoreError
 from engine.intervals import infer_interval
 from engine.io.source import sample_contours_path
-from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.heads import DatasetHeads
 from engine.serve.pack import HeadColumns
 from engine.serve.renderer import Renderer
@@ -71,13 +71,13 @@ def test_stored_labels_are_those_placed_from_the_stored_contours(sample_store: P
 
 def count_placements(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     calls: list[int] = []
-    real = serve_labels.place_labels
+    real = build_labels.place_labels
 
     def counted(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
         calls.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(serve_labels, "place_labels", counted)
+    monkeypatch.setattr(build_labels, "place_labels", counted)
     return calls
 
 

@@ -15,15 +15,15 @@ import pytest
 from numpy.testing import assert_array_equal
 from synthetic_rasters import fractal_heights, write_geotiff
 
+import engine.build.datasets as datasets
 import engine.ccsm.blocks as blocks
-import engine.serve.datasets as datasets
+from engine.build.datasets import SourceSpec, build_dataset
 from engine.ccsm.build import build_contour_set, build_into
 from engine.ccsm.spool import MemorySpool
 from engine.errors import StoreError
 from engine.parallel import local_pool, map_ordered
 from engine.params import BuildParams
 from engine.scratch import SCRATCH_PREFIX, DiskSpool, host_name, remove_stale_scratch
-from engine.serve.datasets import SourceSpec, build_dataset
 from engine.store.store import CCSStore
 from tests.app.conftest import write_geojson
 from tests.engine.test_blocks import ring_clusters

@@ -21,6 +21,7 @@ import shapely
 from shapely import affinity
 from synthetic_rasters import fractal_heights, write_geotiff
 
+from engine.build.datasets import SourceSpec, build_dataset
 from engine.cartography.labels import LabelStyle, metres_per_px
 from engine.cartography.style import (
     INDEX_LINE_WIDTH_ALONE_PX,
@@ -29,7 +30,6 @@ from engine.cartography.style import (
     RankFade,
     rank_opacity_at,
 )
-from engine.serve.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import Renderer
 from engine.serve.simplify import simplify
 from engine.store.store import CCSStore

@@ -33,7 +33,7 @@ TILES_OF_PIECES = """
 import tempfile
 from pathlib import Path
 from engine.io.sample import sample_contours_path
-from engine.serve.datasets import SourceSpec, build_dataset
+from engine.build.datasets import SourceSpec, build_dataset
 from engine.serve.renderer import Renderer
 from engine.store.store import CCSStore
 from engine.tiles.grid import tiles_covering

@@ -13,7 +13,7 @@ from concurrent.futures import Executor
 from engine.cartography.dataset import dataset_cartography, label_sources
 from engine.cartography.labels import place_labels
 from engine.intervals import infer_interval
-from engine.store.records import LabelAnchors, LabelPlacer, StoredLabels
+from engine.store.records import LabelPlacer, StoredLabels
 from engine.store.store import CCSStore
 
 #: The largest tile zoom served unless configured otherwise; builds place labels for it.
@@ -56,8 +56,3 @@ def label_placer(
     """What :meth:`CCSStore.save` calls to place the labels of the version it writes (the candidates found on
     ``executor``, as the build's other work)."""
     return lambda: place_dataset_labels(store, dataset, max_zoom, executor)
-
-
-def label_anchors(stored: StoredLabels) -> LabelAnchors:
-    """Stored anchors as the renderer uses them."""
-    return stored.anchors

@@ -19,6 +19,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from engine.build.labels import label_placer
+from engine.build.records import contour_rows, dataset_meta
 from engine.cartography.options import PARAMS_KEY, CartographyOptions, check_schedule_fits
 from engine.cartography.units import source_units
 from engine.ccsm.build import BuiltSet, SpooledSet, build_into
@@ -29,8 +31,6 @@ from engine.io.source import read_source
 from engine.parallel import map_ordered
 from engine.params import BuildParams
 from engine.scratch import DiskSpool, ReadScratch
-from engine.serve.labels import label_placer
-from engine.serve.records import contour_rows, dataset_meta
 from engine.store.records import DatasetInfo, NewContour
 from engine.store.schema import STORE_FORMAT
 from engine.store.store import CCSStore
@@ -253,7 +253,7 @@ def save_built(
     executor: Executor | None = None,
 ) -> DatasetInfo:
     """Write a built set as one dataset version, with its label anchors (placed for tiles up to the default
-    maximum zoom, :mod:`engine.serve.labels`).
+    maximum zoom, :mod:`engine.build.labels`).
 
     Rows are made batch by batch (:data:`SAVE_BATCH` contours) on ``executor`` (None: in this process) and
     written as they come back, in order, inside the store's one write transaction, so the rows of only a few

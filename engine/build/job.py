@@ -1,6 +1,6 @@
-"""One dataset build in a process of its own: ``python -m engine.serve.build_job`` reads a JSON job on stdin.
+"""One dataset build in a process of its own: ``python -m engine.build.job`` reads a JSON job on stdin.
 
-The service runs every build this way (``app/builds.py``): the memory a build takes returns to the system when
+The service runs every build this way (``app/datasets/builds.py``): the memory a build takes returns to the system when
 its process ends, a deleted dataset's build is stopped by ending its process group, and the server's
 listening socket is never inherited (the process is started afresh, not forked from the server).
 
@@ -22,11 +22,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from engine.cartography.options import PARAMS_KEY, CartographyOptions
-from engine.errors import BuildCancelled, CCSMError
-from engine.io.source import read_source
-from engine.parallel import lower_priority
-from engine.serve.datasets import (
+from engine.build.datasets import (
     RELIEF_DEM_KEY,
     SourceSpec,
     build_and_save,
@@ -34,6 +30,10 @@ from engine.serve.datasets import (
     build_lock,
     read_scratch,
 )
+from engine.cartography.options import PARAMS_KEY, CartographyOptions
+from engine.errors import BuildCancelled, CCSMError
+from engine.io.source import read_source
+from engine.parallel import lower_priority
 from engine.store.store import CCSStore
 
 log = logging.getLogger("ccsm.build")
