@@ -58,10 +58,11 @@ class Place:
 
 
 #: Places of real trouble: lon/lat across the antimeridian (east and west of it), beyond 80 degrees north and
-#: south, a plain mid-latitude grid, and a projected one.
+#: south, across the equator (a scale is reached at the largest zoom there), a mid-latitude grid, a projected one.
 PLACES = {
     "utm-33n": Place("EPSG:32633", 500_000.0, 5_200_000.0, 30.0),
     "lonlat-alps": Place("EPSG:4326", 10.0, 47.0, 1 / 1200),
+    "lonlat-equator": Place("EPSG:4326", 9.5, 0.01, 1 / 3600),  # Gabon at 1" (SRTM 30 m), across the equator
     "lonlat-antimeridian-east": Place("EPSG:4326", 179.97, -16.5, 1 / 1200),  # runs past +180 (Fiji)
     "lonlat-antimeridian-west": Place("EPSG:4326", -180.0, 65.5, 1 / 1200),  # starts at -180 (Chukotka)
     "lonlat-arctic": Place("EPSG:4326", 20.0, 84.0, 1 / 1200),  # north of 80 N (Svalbard's sea)

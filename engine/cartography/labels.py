@@ -164,6 +164,8 @@ def contour_candidates(
     if len(base) < 3:
         return empty
     zooms, ts = _t_through_zooms(src, ladder, latitude, max_zoom, style.zoom_step)
+    if len(zooms) == 0:  # its first label zoom lies past the last zoom: no zoom to label it at
+        return empty
     mpp = metres_per_px(zooms)
     label_px = style.char_px * len(src.text) + 2 * style.padding_px
     drift = np.hypot(*(top - base).T) * float(np.max(ts / mpp))
