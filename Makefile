@@ -15,7 +15,7 @@ CHROMIUM ?= /usr/bin/chromium
 PYTEST_ARGS ?=
 NPM_DIRS := $(wildcard web web/plugin tests/app/node bench/geojsonvt)
 
-.PHONY: run test install bench evaluate lint need-node need-chromium need-qgis
+.PHONY: run test install bench evaluate lint need-node need-chromium need-qgis need-rdata
 # Steps install system packages and share one venv: never run them side by side (make -j).
 .NOTPARALLEL:
 
@@ -46,6 +46,10 @@ need-chromium:
 need-qgis:
 	$(call need,/usr/bin/python3 -c "import qgis.core" >/dev/null 2>&1,--no-install-recommends python3-qgis,QGIS's Python bindings (python3-qgis) for the QGIS client test)
 
+# The real-terrain tests (tests/real_dems.py) read DEMs that Debian's R packages ship, through Rscript.
+need-rdata:
+	$(call need,[ -f /usr/lib/R/site-library/terra/ex/elev.tif ] && [ -f /usr/lib/R/site-library/fields/data/RMelevation.rda ] && command -v Rscript >/dev/null 2>&1,--no-install-recommends r-cran-terra r-cran-fields,The real DEMs of R's terra and fields packages (r-cran-terra r-cran-fields))
+
 # The virtual environment. Debian's python3 makes a venv only with python3-venv (ensurepip) installed.
 $(BIN)/pip:
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found; install Python >= 3.11 or run make PYTHON=/path/to/python3" >&2; exit 1; }
@@ -69,7 +73,7 @@ run: install
 # Never passes with a tool missing: node and chromium are required (the tests fail rather than skip without
 # them), and pytest's status 5 (no tests collected) fails make like any other non-zero status.
 # Tools are checked first, so a missing one stops make before the long install.
-test: need-node need-chromium need-qgis install lint
+test: need-node need-chromium need-qgis need-rdata install lint
 	cd web && npm run --if-present test
 	cd web/plugin && npm run --if-present test
 	$(BIN)/python -m pytest -q $(PYTEST_ARGS)

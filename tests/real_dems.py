@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 from matplotlib import cbook
-from synthetic_rasters import write_exact_level_lines
+from synthetic_rasters import write_exact_level_lines, write_geotiff
 
 from engine.io.dem import pixel_centres_to_crs, read_dem
 
@@ -55,3 +55,98 @@ def write_topobathy_contours(path: Path, interval: float, window: tuple[slice, s
         )
 
     return write_exact_level_lines(path, z, interval, lonlat)
+
+
+# -- issue 24: more real terrain, each of another character, read from Debian's R packages at test time ----------
+
+#: Debian's R packages install their data here (r-cran-terra, r-cran-fields).
+R_SITE_LIBRARY = Path("/usr/lib/R/site-library")
+
+
+def r_package_file(package: str, relative: str) -> Path:
+    """A data file an installed R package ships; FileNotFoundError (the tests fail, never skip) naming the
+    Debian package to install when it is missing."""
+    path = R_SITE_LIBRARY / package / relative
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} missing: apt-get install --no-install-recommends r-cran-{package.lower()}")
+    return path
+
+
+def luxembourg_dem() -> Path:
+    """Luxembourg at 30 arc-seconds (``ex/elev.tif`` of R's terra, from SRTM, public domain; the package is
+    GPL-3): 90 x 95 cells of whole metres 141-547 in lon/lat, nodata outside the country's border, so its edge
+    is ragged nodata all round. A dissected plateau (the Ardennes' Oesling, the Gutland's valleys)."""
+    return r_package_file("terra", "ex/elev.tif")
+
+
+def _r_numbers(rda: Path, expression: str) -> np.ndarray:
+    """The doubles ``expression`` gives once the ``.rda`` file is loaded, through Debian's Rscript (a dependency
+    of the R packages): no R reader is needed in the venv."""
+    import subprocess
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "values.bin"
+        script = f'load("{rda}"); writeBin(as.double({expression}), "{out}", endian = "little")'
+        subprocess.run(["Rscript", "--vanilla", "-e", script], check=True, capture_output=True, timeout=60)
+        return np.fromfile(out, dtype="<f8")
+
+
+#: Rows and columns of RMelevation kept (row 0 north): the Front Range and the Continental Divide west of
+#: Denver, about 105.2-106.0 W, 39.5-40.1 N: 1,700 m plains edge to 4,300 m peaks, about 64 km a side.
+ROCKIES_WINDOW = (slice(120, 136), slice(120, 140))
+
+
+def write_rocky_mountains_dem(path: Path, window: tuple[slice, slice] = ROCKIES_WINDOW) -> Path:
+    """High mountains: ``RMelevation`` of R's fields package (PRISM 4 km grid of the Rocky Mountain region,
+    Oregon State University's PRISM group via NCAR; the package is GPL >= 2), a window of it as a lon/lat
+    GeoTIFF."""
+    rda = r_package_file("fields", "data/RMelevation.rda")
+    x, y = _r_numbers(rda, "RMelevation$x"), _r_numbers(rda, "RMelevation$y")
+    z = _r_numbers(rda, "RMelevation$z").reshape(len(y), len(x))[::-1]  # R's z[x, y]; rows north first
+    cell = float(np.mean(np.diff(x)))
+    rows, cols = window
+    north = float(y[::-1][rows.start]) + cell / 2
+    west = float(x[cols.start]) - cell / 2
+    return write_geotiff(path, z[window].astype("float32"), west=west, north=north, cell=cell, crs="EPSG:4326")
+
+
+def write_glacier_dem(path: Path, n: int = 80) -> Path:
+    """A glacier: Franke's glacier data of R's fields package (8,338 points digitized along a glacier's 1,300-
+    2,100 m contours; its place and units are unknown, the package's documentation says), gridded linearly on
+    n x n nodes (nodata outside the points' hull) and laid out in kilometres at a nominal place in UTM 32N."""
+    from scipy.interpolate import griddata
+
+    rda = r_package_file("fields", "data/glacier.rda")
+    loc = _r_numbers(rda, "glacier$loc").reshape(2, -1).T
+    height = _r_numbers(rda, "glacier$y")
+    lo, hi = loc.min(axis=0), loc.max(axis=0)
+    cell = float(np.max(hi - lo)) / (n - 1)
+    cols, rows = np.meshgrid(np.arange(n), np.arange(n))
+    nodes = np.column_stack([lo[0] + cols.ravel() * cell, hi[1] - rows.ravel() * cell])
+    z = griddata(loc, height, nodes, method="linear").reshape(n, n)
+    z = np.where(np.isnan(z), -9999.0, np.round(z)).astype("float32")
+    west, north = 400_000.0 + lo[0] * 1000.0, 5_150_000.0 + hi[1] * 1000.0
+    return write_geotiff(
+        path,
+        z,
+        west=west - cell * 500.0,
+        north=north + cell * 500.0,
+        cell=cell * 1000.0,
+        crs="EPSG:32632",
+        nodata=-9999.0,
+    )
+
+
+def write_dem_window(source: Path, window: tuple[slice, slice], path: Path) -> Path:
+    """Rows and columns ``window`` of any DEM the reader takes, as a GeoTIFF (nodata kept): a real DEM cut to a
+    size whose tiles at every zoom from 1:1,000,000 to 1:40,000 a test can look at."""
+    grid = read_dem(source)
+    a, b, c, d, e, f = grid.transform
+    rows, cols = window
+    assert b == 0.0 and d == 0.0, "a north-up or south-up grid"
+    z = np.asarray(grid.z.filled(-9999.0), dtype="float32")[window]
+    west, north = c + a * cols.start, f + e * rows.start
+    if e > 0:  # south-up rows: flip to north-up
+        z, north = z[::-1], f + e * rows.stop
+    return write_geotiff(path, z, west=west, north=north, cell=abs(a), crs=grid.crs.to_string(), nodata=-9999.0)
