@@ -257,8 +257,9 @@ def save_built(
 
     Rows are made batch by batch (:data:`SAVE_BATCH` contours) on ``executor`` (None: in this process) and
     written as they come back, in order, in the store's bounded write transactions (:meth:`CCSStore.save`), so
-    the rows of only a few batches are in memory at a time and no other write waits on the build. The label candidates are found on ``executor`` too: the build process
-    is left with the writing, so that the save, like the build, goes faster with more workers.
+    the rows of only a few batches are in memory at a time and no other write waits on the build. The label
+    candidates are found on ``executor`` too: the build process is left with the writing, so that the save,
+    like the build, goes faster with more workers.
     """
     meta = dataset_meta(
         built, name=name, source=source, source_hash=digest, params=params, build_seconds=build_seconds
