@@ -28,7 +28,7 @@ from engine.build.job import BuildJob
 from engine.cartography.options import PARAMS_KEY as CARTOGRAPHY_KEY
 from engine.cartography.options import CartographyOptions
 from engine.errors import CCSMError, StoreError, StoreNotReady, StoreUnwritable, UnknownLayer
-from engine.scratch import pid_alive
+from engine.scratch import pid_alive, remove_stale_scratch
 from engine.serve.renderer import Renderer, TileOptions
 from engine.store.records import DatasetInfo
 from engine.store.store import CCSStore
@@ -114,6 +114,11 @@ def open_checked_store(path: Path) -> CCSStore:
         store.close()
         raise StoreError(f"store {path.name} is damaged ({problem}); {advice}")
     store.checkpoint()
+    for removed in remove_stale_scratch(path.parent):  # a killed build's; a running one's stay
+        log.info("removed the stale scratch file %s", removed.name)
+    leftovers = store.purge_leftovers()  # the rows a killed build staged, a replaced version's not yet removed
+    if leftovers:
+        log.info("removed the rows of %d stopped build(s) or replaced version(s)", len(leftovers))
     return store
 
 

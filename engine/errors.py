@@ -47,6 +47,10 @@ class StoreUnwritable(StoreError):
     """The store (or the folder of uploads beside it) cannot be written: a full disk, a read-only file system."""
 
 
+class StoreBusy(StoreError):
+    """Another write holds the store longer than a request waits: nothing was written; try again shortly."""
+
+
 class BuildCancelled(CCSMError):
     """A build's dataset was deleted while it built: nothing is written."""
 

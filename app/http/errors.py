@@ -34,6 +34,7 @@ from engine.errors import (
     InvalidContour,
     InvalidParameter,
     SourceError,
+    StoreBusy,
     StoreError,
     StoreNotReady,
     StoreUnwritable,
@@ -64,6 +65,7 @@ STATUS_CODES: dict[type[Exception], int] = {
     ClientGone: 499,  # nobody reads it: the status a proxy logs for a request its client closed
     SurfaceFitError: 422,
     StoreNotReady: 503,
+    StoreBusy: 503,  # another write holds the store: nothing done, Retry-After
     StoreError: 503,
     CCSMError: 400,
 }

@@ -195,7 +195,7 @@ def build_and_save(
     only_if_building: bool = False,
     executor: Executor | None = None,
 ) -> DatasetInfo | None:
-    """Build every contour of a read source and write the dataset in one transaction.
+    """Build every contour of a read source and write the dataset (made visible by one short switch).
 
     Parameters
     ----------
@@ -256,15 +256,16 @@ def save_built(
     maximum zoom, :mod:`engine.build.labels`).
 
     Rows are made batch by batch (:data:`SAVE_BATCH` contours) on ``executor`` (None: in this process) and
-    written as they come back, in order, inside the store's one write transaction, so the rows of only a few
-    batches are in memory at a time. The label candidates are found on ``executor`` too: the build process
-    is left with the writing, so that the save, like the build, goes faster with more workers.
+    written as they come back, in order, in the store's bounded write transactions (:meth:`CCSStore.save`), so
+    the rows of only a few batches are in memory at a time and no other write waits on the build. The label
+    candidates are found on ``executor`` too: the build process is left with the writing, so that the save,
+    like the build, goes faster with more workers.
     """
     meta = dataset_meta(
         built, name=name, source=source, source_hash=digest, params=params, build_seconds=build_seconds
     )
     rows = _rows_in_batches(built, executor)
-    labels = label_placer(store, dataset, executor=executor)
+    labels = label_placer(store, executor=executor)
     return store.save(dataset, meta, rows, only_if_building=only_if_building, labels=labels)
 
 

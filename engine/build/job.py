@@ -11,6 +11,7 @@ on that row and writes the dataset only while the row is there (:meth:`CCSStore.
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
 import os
@@ -94,9 +95,21 @@ def _progress_reporter(store: CCSStore, dataset: str) -> Any:
     return report
 
 
-def _client_message(job: BuildJob, exc: CCSMError) -> str:
-    """The error as a client may read it: the folder of the source cut away."""
-    return str(exc).replace(str(Path(job.source_path).parent) + "/", "")[:1000]
+def _client_message(job: BuildJob, exc: BaseException) -> str:
+    """The error as a client may read it: the folder of the source cut away; a full disk said first."""
+    text = str(exc).replace(str(Path(job.source_path).parent) + "/", "")[:1000]
+    return f"disk full: {text}" if _disk_full(exc) else text
+
+
+def _disk_full(exc: BaseException | None) -> bool:
+    """Whether the exception, or one it was raised from, is the file system saying it has no room."""
+    while exc is not None:
+        if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            return True
+        if "disk is full" in str(exc).lower() or "no space left" in str(exc).lower():
+            return True
+        exc = exc.__cause__ or exc.__context__
+    return False
 
 
 def run(job: BuildJob) -> int:
@@ -147,9 +160,10 @@ def run(job: BuildJob) -> int:
         log.warning("building %s failed: %s", job.dataset, ascii(str(exc)))
         store.fail_build(job.dataset, _client_message(job, exc))
         return 1
-    except Exception:
+    except Exception as exc:
         log.exception("building %s failed", job.dataset)
-        store.fail_build(job.dataset, "build failed (see the service log)")
+        reason = _client_message(job, exc) if _disk_full(exc) else "build failed (see the service log)"
+        store.fail_build(job.dataset, reason)
         return 1
     finally:
         if job.kind == "upload":

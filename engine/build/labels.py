@@ -2,8 +2,9 @@
 with the version (docs/design.md section 9.3).
 
 Placing the labels of a large dataset takes a minute or more; it depends only on the stored contours, their
-metadata and the last zoom served, so the build does it once (inside the store's write transaction, where the
-new rows' fids are known) and a tile only reads the result.
+metadata and the last zoom served, so the build does it once (on its staged rows, whose fids the dataset keeps,
+before the switch that makes them the dataset's: no write transaction is open meanwhile) and a tile only reads
+the result.
 """
 
 from __future__ import annotations
@@ -51,8 +52,9 @@ def place_dataset_labels(
 
 
 def label_placer(
-    store: CCSStore, dataset: str, max_zoom: int = DEFAULT_MAX_ZOOM, executor: Executor | None = None
+    store: CCSStore, max_zoom: int = DEFAULT_MAX_ZOOM, executor: Executor | None = None
 ) -> LabelPlacer:
-    """What :meth:`CCSStore.save` calls to place the labels of the version it writes (the candidates found on
-    ``executor``, as the build's other work)."""
-    return lambda: place_dataset_labels(store, dataset, max_zoom, executor)
+    """What :meth:`CCSStore.save` calls, with the id its rows are staged under, to place the labels of the
+    version it writes (the candidates found on ``executor``, as the build's other work)."""
+    return lambda staged: place_dataset_labels(store, staged, max_zoom, executor)
+

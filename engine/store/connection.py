@@ -3,6 +3,9 @@
 - One file, stdlib ``sqlite3``, WAL mode: several processes read it at once while one writes.
 - A write runs in one ``BEGIN IMMEDIATE`` transaction; a write the file system refuses (full disk, read-only
   file) is rolled back and raised as :class:`~engine.errors.StoreUnwritable`.
+- Every write transaction is short (a build writes in bounded steps, :mod:`engine.store.staging`), so a write
+  waits at most :data:`BUSY_TIMEOUT_S` for another; past that it is raised as :class:`~engine.errors.StoreBusy`
+  (nothing written), never as SQLite's "database is locked".
 
 What is read and written is :class:`engine.store.builds.BuildBook`'s and :class:`engine.store.store.CCSStore`'s.
 """
@@ -17,11 +20,15 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from engine.errors import StoreError, StoreFormatError, StoreUnwritable
+from engine.errors import StoreBusy, StoreError, StoreFormatError, StoreUnwritable
 from engine.store.schema import SCHEMA, STORE_FORMAT
 
 #: SQLite's messages for a write the file system refuses (full disk, read-only mount or file, I/O error).
 _UNWRITABLE_MESSAGES = ("database or disk is full", "readonly database", "disk i/o error", "unable to open")
+#: SQLite's messages for a write that found the store locked by another for longer than it waits.
+_BUSY_MESSAGES = ("database is locked", "database is busy", "database table is locked")
+#: Seconds a write waits for another process's write transaction (each is short: a bounded step of a build).
+BUSY_TIMEOUT_S = 5.0
 
 
 def unwritable_reason(exc: BaseException) -> str | None:
@@ -32,6 +39,11 @@ def unwritable_reason(exc: BaseException) -> str | None:
     if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EROFS, errno.EACCES, errno.EDQUOT, errno.EPERM):
         return os.strerror(exc.errno or 0)
     return None
+
+
+def is_busy(exc: BaseException) -> bool:
+    """Whether SQLite gave up waiting for another connection's lock."""
+    return isinstance(exc, sqlite3.OperationalError) and any(m in str(exc).lower() for m in _BUSY_MESSAGES)
 
 
 def create_schema(con: sqlite3.Connection) -> None:
@@ -95,13 +107,13 @@ class StoreFile:
         con: sqlite3.Connection | None = getattr(self._local, "con", None)
         if con is None:
             uri = f"file:{self.path}?mode={'ro' if self.readonly else 'rwc'}"
-            con = sqlite3.connect(uri, uri=True, timeout=60.0, isolation_level=None, check_same_thread=False)
+            con = sqlite3.connect(uri, uri=True, timeout=BUSY_TIMEOUT_S, isolation_level=None, check_same_thread=False)
             if not self.readonly:
                 con.execute("PRAGMA journal_mode=WAL")
             # NORMAL is durable for WAL across application crashes (kill -9); only a power cut may lose the
             # last commit, never corrupt the file.
             con.execute("PRAGMA synchronous=NORMAL")
-            con.execute("PRAGMA busy_timeout=60000")
+            con.execute(f"PRAGMA busy_timeout={int(BUSY_TIMEOUT_S * 1000)}")
             if self.mmap_bytes:
                 con.execute(f"PRAGMA mmap_size={self.mmap_bytes}")
             self._local.con = con
@@ -122,6 +134,10 @@ class StoreFile:
                 raise
             con.execute("COMMIT")
         except sqlite3.OperationalError as exc:
+            if is_busy(exc):
+                if con.in_transaction:
+                    con.execute("ROLLBACK")
+                raise StoreBusy(f"store {self.path.name} is busy with another write; try again shortly") from exc
             reason = unwritable_reason(exc)
             if reason is None:
                 raise

@@ -220,9 +220,9 @@ class StoredLabels:
     anchors: LabelAnchors
 
 
-#: Places a dataset's labels once its rows and metadata are written: called inside the write transaction on
-#: the writing thread, whose reads (``dataset``, ``load``, ...) see the new version before it is committed.
-LabelPlacer = Callable[[], StoredLabels]
+#: Places a dataset's labels once its rows and metadata are staged: called with the staged id, under which the
+#: store's reads (``dataset``, ``load``, ...) see the new version before the switch makes it the dataset's.
+LabelPlacer = Callable[[str], StoredLabels]
 
 
 @dataclass(frozen=True)

@@ -4,8 +4,9 @@ Persistence only: the rows arrive ready (reprojected, with their significance; :
 and leave decoded; what they mean is the serving layer's business.
 
 - Contour extents sit in an R*Tree (EPSG:3857), so a tile looks up only the contours it touches.
-- A dataset is written in **one transaction** (old rows out, new rows in, new ``data_version``): a build
-  killed at any moment leaves the previous content as it was; SQLite's journal undoes the partial write.
+- A dataset's rows are written in bounded transactions under a private id and made its new version by **one
+  short switch** (:mod:`engine.store.staging`): no write waits on a build, and a build killed at any moment
+  leaves the previous content as it was (its staged rows are removed later).
 - Each dataset records the content hash of its source and build parameters, so a changed source is rebuilt
   and an unchanged one is served at once after a restart.
 
@@ -25,7 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from engine.errors import BuildCancelled, UnknownLayer
+from engine.errors import BuildCancelled, StoreError, UnknownLayer
 from engine.store.builds import BuildBook, forget_build, has_build, is_building
 from engine.store.codec import (
     CONTOUR_COLUMNS,
@@ -55,6 +56,20 @@ from engine.store.records import (
     StoredPieces,
 )
 from engine.store.schema import PIECE_KINDS
+from engine.store.staging import (
+    is_private,
+    leftover_ids,
+    owner_of,
+    purge_some,
+    rename_rows,
+    retired_id,
+    staged_id,
+)
+
+#: A build's rows are written at most this many contours, or rows, per transaction (then the next write of
+#: anyone else may go): a batch of the sample's contours is written in a few tens of milliseconds.
+STAGE_CONTOURS = 64
+STAGE_ROWS = 100_000
 
 
 def pieces_sql(kind: str, by_fid: bool) -> str:
@@ -93,8 +108,8 @@ class CCSStore(BuildBook):
 
     # -- datasets ----------------------------------------------------------------------------------------
     def dataset_ids(self) -> list[str]:
-        """Ids of the stored (ready) datasets, sorted."""
-        return [r[0] for r in self._con().execute("SELECT id FROM datasets ORDER BY id")]
+        """Ids of the stored (ready) datasets, sorted (a build's staged row is none)."""
+        return [r[0] for r in self._con().execute("SELECT id FROM datasets ORDER BY id") if not is_private(r[0])]
 
     def data_version(self, dataset: str) -> int | None:
         """The dataset's current data_version, or None if it is not stored."""
@@ -134,56 +149,139 @@ class CCSStore(BuildBook):
         only_if_building: bool = False,
         labels: LabelPlacer | None = None,
     ) -> DatasetInfo:
-        """Write a dataset, replacing any previous version, in one transaction.
+        """Write a dataset, replacing any previous version: staged in bounded transactions, then one switch.
 
-        Inside the transaction the old rows are deleted and the new ones inserted as ``contours`` yields
-        them (a generator keeps only one batch of rows in memory; the dataset's row, with its bounds and
-        counts, goes in last). An exception (or a killed process) before COMMIT leaves the previous version
-        untouched. With ``only_if_building`` the write happens only while the dataset's build is still
-        recorded (checked inside the transaction), so a dataset deleted during its build never comes back:
-        BuildCancelled is raised instead. ``progress`` gets (rows written, rows known so far). ``labels``, when
-        given, is called after the rows and the dataset's row are in, and its anchors are written in the same
-        transaction (with the new ``data_version``).
+        The rows are written as ``contours`` yields them (a generator keeps only one batch in memory), a batch
+        of at most :data:`STAGE_CONTOURS` contours or :data:`STAGE_ROWS` rows per transaction, under the
+        dataset's staged id (:mod:`engine.store.staging`): other writes wait at most one batch, readers see
+        nothing of it. The dataset's row goes in last; ``labels``, when given, is called with the staged id (its
+        rows and row are readable under it) and returns the anchors. The switch is one short transaction: the
+        old version's rows retired, the staged ones renamed to the dataset, its row, labels and new
+        ``data_version`` in; the retired rows are then removed a few at a time. An exception (or a killed
+        process) before the switch leaves the previous version as it was and its staged rows to be removed.
+        With ``only_if_building`` every transaction checks that the dataset's build is still recorded, the
+        switch too, so a dataset deleted during its build never comes back: BuildCancelled is raised instead.
+        ``progress`` gets (rows written, rows known so far).
         """
-        with self._write() as cur:
-            if only_if_building and not is_building(cur, dataset):
-                raise BuildCancelled(f"dataset {dataset!r} was deleted while it built")
-            self._delete_rows(cur, dataset)
-            counts = RowTally()
-            step = 256
-            for c in contours:
+        stage = staged_id(dataset)
+        self.purge(stage)  # what a killed build of this id left
+        try:
+            counts = self._stage_rows(dataset, stage, contours, progress, only_if_building)
+            with self._write() as cur:
+                self._check_building(cur, dataset, only_if_building)
                 cur.execute(
-                    "INSERT INTO contours(dataset, contour_id, elevation, closed, grp, vanish_scale, "
-                    "length_m, n_rows, n_input, base, top, original, original_w, t_at_scale, sim_t, sim, sig, "
-                    "sig_top, sig_original) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
-                    contour_row(dataset, c),
+                    "INSERT INTO datasets VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                    dataset_row(stage, meta, 0, time.time(), counts),
                 )
-                fid = cur.lastrowid
-                cur.execute("INSERT INTO contour_rtree VALUES (?,?,?,?,?,?)", (fid, *c.box, dataset))
-                if c.issues:
-                    insert_issues(cur, dataset, int(fid or 0), c.issues)
-                for kind, k, blobs, box in contour_pieces(c):
-                    marks = ",".join("?" * len(blobs))
-                    cur.execute(f"INSERT INTO {kind}_pieces VALUES (NULL,?,?,{marks})", (fid, k, *blobs))
-                    cur.execute(f"INSERT INTO {kind}_piece_rtree VALUES (?,?,?,?,?,?)", (cur.lastrowid, *box, dataset))
-                counts.add(c)
-                if progress and counts.n % step == 0:
-                    progress(counts.n, counts.n)
-            if progress:
-                progress(counts.n, counts.n)
-            counter = int(cur.execute("SELECT value FROM store_meta WHERE key='version_counter'").fetchone()[0]) + 1
-            cur.execute("UPDATE store_meta SET value=? WHERE key='version_counter'", (str(counter),))
-            cur.execute(
-                "INSERT INTO datasets VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
-                dataset_row(dataset, meta, counter, time.time(), counts),
-            )
-            if labels is not None:
-                placed = labels()
-                cur.execute("INSERT INTO labels VALUES (?,?,?,?,?,?,?,?,?,?,?,?)", label_row(dataset, counter, placed))
-                for label_fid, reason in placed.anchors.issues:
-                    insert_issues(cur, dataset, label_fid, [("labels", reason)])
-            forget_build(cur, dataset)
+            placed = labels(stage) if labels is not None else None
+            with self._write() as cur:
+                self._check_building(cur, dataset, only_if_building)
+                self._switch(cur, dataset, stage, placed)
+        except BaseException:
+            self._purge_quietly(stage)
+            raise
+        self._purge_quietly(retired_id(dataset))
         return self.dataset(dataset)
+
+    @staticmethod
+    def _check_building(cur: sqlite3.Cursor, dataset: str, only_if_building: bool) -> None:
+        if only_if_building and not is_building(cur, dataset):
+            raise BuildCancelled(f"dataset {dataset!r} was deleted while it built")
+
+    def _stage_rows(
+        self,
+        dataset: str,
+        stage: str,
+        contours: Iterable[NewContour],
+        progress: Callable[[int, int], None] | None,
+        only_if_building: bool,
+    ) -> RowTally:
+        """Write the rows under ``stage``, a bounded batch per transaction (made outside it)."""
+        counts = RowTally()
+        batch: list[NewContour] = []
+        rows = 0
+        for c in chain(contours, [None]):
+            if c is not None:
+                batch.append(c)
+                rows += len(c.base)
+            if batch and (c is None or len(batch) >= STAGE_CONTOURS or rows >= STAGE_ROWS):
+                with self._write() as cur:
+                    self._check_building(cur, dataset, only_if_building)
+                    for each in batch:
+                        self._insert_contour(cur, stage, each)
+                for each in batch:
+                    counts.add(each)
+                batch, rows = [], 0
+                if progress:
+                    progress(counts.n, counts.n)
+        return counts
+
+    @staticmethod
+    def _insert_contour(cur: sqlite3.Cursor, stage: str, c: NewContour) -> None:
+        cur.execute(
+            "INSERT INTO contours(dataset, contour_id, elevation, closed, grp, vanish_scale, "
+            "length_m, n_rows, n_input, base, top, original, original_w, t_at_scale, sim_t, sim, sig, "
+            "sig_top, sig_original) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+            contour_row(stage, c),
+        )
+        fid = cur.lastrowid
+        cur.execute("INSERT INTO contour_rtree VALUES (?,?,?,?,?,?)", (fid, *c.box, stage))
+        if c.issues:
+            insert_issues(cur, stage, int(fid or 0), c.issues)
+        for kind, k, blobs, box in contour_pieces(c):
+            marks = ",".join("?" * len(blobs))
+            cur.execute(f"INSERT INTO {kind}_pieces VALUES (NULL,?,?,{marks})", (fid, k, *blobs))
+            cur.execute(f"INSERT INTO {kind}_piece_rtree VALUES (?,?,?,?,?,?)", (cur.lastrowid, *box, stage))
+
+    @classmethod
+    def _switch(cls, cur: sqlite3.Cursor, dataset: str, stage: str, placed: StoredLabels | None) -> None:
+        """The one short transaction that makes the staged rows the dataset's new version."""
+        cls._retire(cur, dataset)
+        rename_rows(cur, stage, dataset)
+        counter = int(cur.execute("SELECT value FROM store_meta WHERE key='version_counter'").fetchone()[0]) + 1
+        cur.execute("UPDATE store_meta SET value=? WHERE key='version_counter'", (str(counter),))
+        cur.execute(
+            "UPDATE datasets SET id=?, data_version=?, built_at=? WHERE id=?", (dataset, counter, time.time(), stage)
+        )
+        if placed is not None:
+            cur.execute("INSERT INTO labels VALUES (?,?,?,?,?,?,?,?,?,?,?,?)", label_row(dataset, counter, placed))
+            for label_fid, reason in placed.anchors.issues:
+                insert_issues(cur, dataset, label_fid, [("labels", reason)])
+        forget_build(cur, dataset)
+
+    @staticmethod
+    def _retire(cur: sqlite3.Cursor, dataset: str) -> None:
+        """Take a dataset's version out of sight: its row, labels and issues gone, its contour rows under the
+        retired id (removed afterwards by :meth:`purge`)."""
+        cur.execute("DELETE FROM datasets WHERE id=?", (dataset,))
+        cur.execute("DELETE FROM labels WHERE dataset=?", (dataset,))
+        delete_issues(cur, dataset)
+        rename_rows(cur, dataset, retired_id(dataset))
+
+    def purge(self, ident: str) -> None:
+        """Remove every row of a private id (:mod:`engine.store.staging`), a few contours per transaction."""
+        while True:
+            with self._write() as cur:
+                if purge_some(cur, ident) == 0:
+                    return
+
+    def _purge_quietly(self, ident: str) -> None:
+        try:
+            self.purge(ident)
+        except StoreError:
+            pass  # a full disk or a busy store: the next build of this id or the next start removes them
+
+    def purge_leftovers(self) -> list[str]:
+        """Remove the rows of builds no longer running and of versions replaced or deleted (at a start);
+        the private ids removed. A staged id whose build is recorded as running (its process alive) is kept."""
+        running = {d for d, s in self.build_statuses().items() if s.state == "building"}
+        removed = []
+        for ident in leftover_ids(self._con()):
+            if owner_of(ident) in running:
+                continue
+            self._purge_quietly(ident)
+            removed.append(ident)
+        return removed
 
     def labels(self, dataset: str) -> StoredLabels | None:
         """The label anchors stored with the dataset's current version, or None (none were placed at build)."""
@@ -195,36 +293,27 @@ class CCSStore(BuildBook):
         the first :data:`engine.store.issues.REPORTED_ISSUES`) and how many there are."""
         return read_issues(self._con(), dataset)
 
-    @staticmethod
-    def _delete_rows(cur: sqlite3.Cursor, dataset: str) -> None:
-        cur.execute(
-            "DELETE FROM contour_rtree WHERE fid IN (SELECT fid FROM contours WHERE dataset=?)", (dataset,)
-        )
-        for kind in PIECE_KINDS:
-            pieces = f"SELECT piece FROM {kind}_pieces WHERE fid IN (SELECT fid FROM contours WHERE dataset=?)"
-            cur.execute(f"DELETE FROM {kind}_piece_rtree WHERE piece IN ({pieces})", (dataset,))
-            cur.execute(f"DELETE FROM {kind}_pieces WHERE piece IN ({pieces})", (dataset,))
-        cur.execute("DELETE FROM contours WHERE dataset=?", (dataset,))
-        cur.execute("DELETE FROM labels WHERE dataset=?", (dataset,))
-        delete_issues(cur, dataset)
-        cur.execute("DELETE FROM datasets WHERE id=?", (dataset,))
-
     def delete(self, dataset: str) -> bool:
         """Remove a dataset and its build status; True if it was stored."""
-        with self._write() as cur:
-            existed = cur.execute("SELECT 1 FROM datasets WHERE id=?", (dataset,)).fetchone() is not None
-            self._delete_rows(cur, dataset)
-            forget_build(cur, dataset)
-        return existed
+        return self._delete(dataset)[0]
 
     def delete_any(self, dataset: str) -> bool:
         """Remove a dataset, stored or only building or failed; True if there was either."""
+        stored, build = self._delete(dataset)
+        return stored or build
+
+    def _delete(self, dataset: str) -> tuple[bool, bool]:
+        """One short transaction takes the dataset out of sight and forgets its build (a build still running
+        can no longer write it); its rows, and what its build staged, are then removed a few at a time.
+        (stored, had a build)."""
         with self._write() as cur:
             stored = cur.execute("SELECT 1 FROM datasets WHERE id=?", (dataset,)).fetchone() is not None
             build = has_build(cur, dataset)
-            self._delete_rows(cur, dataset)
+            self._retire(cur, dataset)
             forget_build(cur, dataset)
-        return stored or build
+        self._purge_quietly(retired_id(dataset))
+        self._purge_quietly(staged_id(dataset))
+        return stored, build
 
     # -- contours ----------------------------------------------------------------------------------------
     def query(self, dataset: str, bounds_3857: Sequence[float]) -> list[int]:

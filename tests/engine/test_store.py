@@ -8,6 +8,7 @@ import pytest
 from engine.build.datasets import SourceSpec, build_dataset, source_hash
 from engine.errors import StoreError, UnknownLayer
 from engine.io.source import read_source
+from engine.store.staging import leftover_ids
 from engine.store.store import CCSStore
 from tests.app.conftest import synthetic_features, write_geojson
 
@@ -79,12 +80,15 @@ def test_failed_write_rolls_back(store, src, monkeypatch):
     with pytest.raises(sqlite3.IntegrityError, match="NOT NULL"):
         build_dataset(store, SourceSpec(src, "h", "h", source_scale=40_000), workers=1)
     store._con().set_trace_callback(None)
-    # The failure came inside the write: old rows deleted, new ones inserted, then rolled back.
-    begin = statements.index("BEGIN IMMEDIATE")
-    inside = statements[begin:]
-    assert any(q.startswith("DELETE FROM contours") for q in inside)
-    assert sum(q.startswith("INSERT INTO contours") for q in inside) == 6
-    assert inside[-1] == "ROLLBACK"
+    # The failure came while the rows were staged: the batch's transaction (6 inserts) rolled back, no switch,
+    # the staged rows removed, the dataset's rows never touched.
+    rollback = statements.index("ROLLBACK")
+    batch = statements[: rollback + 1][::-1]
+    batch = batch[: batch.index("BEGIN IMMEDIATE")]
+    assert sum(q.startswith("INSERT INTO contours") for q in batch) == 6
+    assert not any(q.startswith("UPDATE datasets SET id") for q in statements)
+    assert not any("DELETE FROM contours WHERE dataset='h'" in q for q in statements)
+    assert leftover_ids(store._con()) == []
     for reader in (store, CCSStore(store.path)):
         info = reader.dataset("h")
         assert (info.data_version, info.source_hash) == (before.data_version, before.source_hash)
