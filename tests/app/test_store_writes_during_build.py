@@ -15,9 +15,9 @@ from pathlib import Path
 import pytest
 
 import engine.store.store as store_module
+from engine.build import job as build_job
 from engine.build.job import BuildJob
 from engine.scratch import SCRATCH_PREFIX, host_name
-from engine.serve import build_job
 from engine.store.staging import leftover_ids
 from engine.store.store import CCSStore
 from tests.app.conftest import synthetic_features, write_geojson

@@ -32,11 +32,10 @@ from real_dems import (
     write_rocky_mountains_dem,
     write_topobathy_contours,
 )
-from terrain_strategies import TERRAIN_SETTINGS, TerrainCase, terrains
-from test_served_topology import (
+from support.mvt import decode_served as decode
+from support.served_topology import (
     LARGEST_SCALE,
     SMALLEST_SCALE,
-    decode,
     met_in_input,
     morph_drawing,
     new_pairs,
@@ -44,6 +43,7 @@ from test_served_topology import (
     tile_lines,
     zooms_to_check,
 )
+from terrain_strategies import TERRAIN_SETTINGS, TerrainCase, terrains
 from typer.testing import CliRunner
 
 from app.cli import _register_commands, app
