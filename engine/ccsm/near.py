@@ -7,7 +7,7 @@ the answers; these kernels work on the arrays themselves and give the same answe
 STRtree query of boxes (boxes that only touch meet), and the distance ``shapely.distance`` gives between two
 linestrings: the smallest segment-to-segment distance, each from the textbook formulas (the projection parameter
 of a point on a segment, the perpendicular distance by the cross product, the parametric intersection test),
-evaluated in an order whose rounding agrees with shapely's to the last bit (tests/engine/test_near.py).
+evaluated in an order whose rounding agrees with shapely's to the last bit (tests/engine/ccsm/test_near.py).
 """
 
 from __future__ import annotations

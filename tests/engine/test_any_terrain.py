@@ -4,7 +4,7 @@ tuned for (tests/real_dems.py) go through the whole pipeline: build, tiles at ev
 five scales and ``ccsm export``. Asserted: no exception anywhere, and the product's invariants:
 
 - zero new crossings (contours apart in the input never meet in simplify, tiles or morph tiles; the checkers of
-  tests/engine/test_served_topology.py);
+  tests/engine/serve/test_served_topology.py);
 - t = 0 at the source scale and at every larger scale;
 - similarity never rising as the scale gets smaller, contour by contour;
 - feature ids stable across zooms (every id served is a stored contour's, with that contour's elevation);

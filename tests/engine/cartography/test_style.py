@@ -13,7 +13,7 @@ import pytest
 from engine.cartography.style import FONT_STACK, RankFade, StyleSource, build_style, fade_opacity
 from engine.errors import InvalidParameter
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 VALIDATOR = REPO / "web" / "node_modules" / "@maplibre" / "maplibre-gl-style-spec" / "dist" / "gl-style-validate.mjs"
 BASE = "http://127.0.0.1:8000"
 #: Three ranks as a schedule of 20 m contours would give them (the top one never hides).

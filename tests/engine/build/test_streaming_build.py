@@ -26,7 +26,7 @@ from engine.params import BuildParams
 from engine.scratch import SCRATCH_PREFIX, DiskSpool, host_name, remove_stale_scratch
 from engine.store.store import CCSStore
 from tests.app.conftest import write_geojson
-from tests.engine.test_blocks import ring_clusters
+from tests.engine.ccsm.test_blocks import ring_clusters
 
 
 class CountingSpool(MemorySpool):

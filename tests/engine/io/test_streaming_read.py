@@ -19,7 +19,7 @@ from engine.parallel import map_ordered
 from engine.params import BuildParams
 from engine.scratch import SCRATCH_PREFIX, ReadScratch, ScratchContours
 from engine.types import Contour, ContourSet, ContourSubset
-from tests.engine.test_blocks import ring_clusters
+from tests.engine.ccsm.test_blocks import ring_clusters
 
 WEST, NORTH, CELL = 740_000.0, 4_060_000.0, 30.0
 

@@ -23,7 +23,7 @@ from engine.store.store import CCSStore
 from engine.tiles.grid import mercator_to_lonlat, tiles_covering
 from engine.types import Bounds
 
-DATA = Path(__file__).resolve().parents[1] / "data"
+DATA = Path(__file__).resolve().parents[2] / "data"
 DATASET = "small"
 MINZOOM, MAXZOOM = 0, 14
 

@@ -16,7 +16,7 @@ from engine.io.dem import read_dem
 from engine.io.dem_tracing import LEVEL_OFFSET, contour_levels
 from engine.io.source import contours_from_dem, read_source
 
-DATA = Path(__file__).resolve().parents[1] / "data"
+DATA = Path(__file__).resolve().parents[2] / "data"
 
 #: Upper-left corner of the synthetic UTM 16N grids, metres.
 WEST, NORTH = 740_000.0, 4_060_000.0

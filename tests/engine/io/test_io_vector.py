@@ -26,7 +26,7 @@ from engine.io.vector_reader import ELEVATION_FIELDS
 from engine.tolerances import Tolerances
 from engine.types import BadFeature, ContourSet
 
-DATA = Path(__file__).resolve().parents[1] / "data"
+DATA = Path(__file__).resolve().parents[2] / "data"
 
 #: A point near Jacksboro, Tennessee, and its UTM 16N coordinates (metres).
 LON0, LAT0 = -84.25, 36.6
