@@ -14,6 +14,7 @@ from fastapi.responses import FileResponse, JSONResponse
 from app.http.public_url import public_base_url
 from app.http.responses import etag_matches, make_etag
 from app.routes.dependencies import get_service, get_settings
+from app.routes.params import DatasetPath
 from app.service import DatasetService, lonlat_bounds
 from app.settings import Settings
 from engine.cartography.glyphs import glyph_range_pbf
@@ -30,9 +31,6 @@ STYLE_MAX_AGE_S = 60
 GLYPHS_MAX_AGE_S = 86_400
 #: Glyph ranges kept in memory (each about 100 kB; MapLibre asks for one or two for Latin text).
 GLYPH_CACHE_RANGES = 16
-
-DatasetPath = Annotated[str, PathParam(description="Dataset id (see GET /datasets).", max_length=64)]
-
 
 def rank_fades(schedule: Schedule) -> list[RankFade]:
     """The fade range of each rank of a dataset's schedule (the top rank, at NEVER, never hides)."""
