@@ -12,6 +12,7 @@ import mapbox_vector_tile
 import pytest
 from pmtiles.reader import MmapSource, Reader, all_tiles
 from pmtiles.tile import Compression, TileType, zxy_to_tileid
+from support.export import fail_render_batch_after
 
 import engine.serve.export as export_mod
 from engine.errors import InvalidParameter, StoreError, UnknownLayer
@@ -203,16 +204,7 @@ def test_a_failed_export_leaves_the_existing_file_and_no_temporary(
 ) -> None:
     out = tmp_path / f"old{suffix}"
     out.write_bytes(b"the previous archive")
-    calls = []
-    real = export_mod.render_batch
-
-    def failing(*args, **kwargs):  # type: ignore[no-untyped-def]
-        calls.append(1)
-        if len(calls) > 2:
-            raise RuntimeError("disk on fire")
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(export_mod, "render_batch", failing)
+    calls = fail_render_batch_after(monkeypatch, 2, RuntimeError("disk on fire"))
     with pytest.raises(RuntimeError, match="disk on fire"):
         export_dataset(store, DATASET, out, workers=1, batch_size=2)
     assert len(calls) == 3  # it failed half way, after tiles were written to the temporary file
