@@ -2,18 +2,12 @@
 
 from __future__ import annotations
 
-from typing import Annotated
-
-from fastapi import APIRouter, Depends, Request, Response
+from fastapi import APIRouter, Request, Response
 
 from app.http.disconnect import unless_client_goes
 from app.http.responses import etag_matches, make_etag
 from app.render.jobs import HillshadeJob
-from app.render.pool import RenderLanes, get_render_lanes
-from app.routes.dependencies import get_service, get_settings
-from app.routes.params import DatasetPath, TileX, TileY, TileZ, tile_responses
-from app.service import DatasetService
-from app.settings import Settings
+from app.routes.params import DatasetPath, LanesDep, ServiceDep, SettingsDep, TileX, TileY, TileZ, tile_responses
 from engine.tiles.grid import check_tile
 
 router = APIRouter(tags=["tiles"])
@@ -35,9 +29,9 @@ async def get_hillshade_tile(
     z: TileZ,
     x: TileX,
     y: TileY,
-    service: Annotated[DatasetService, Depends(get_service)],
-    settings: Annotated[Settings, Depends(get_settings)],
-    lanes: Annotated[RenderLanes, Depends(get_render_lanes)],
+    service: ServiceDep,
+    settings: SettingsDep,
+    lanes: LanesDep,
 ) -> Response:
     """One hillshade tile of the DEM a dataset was made from (or was given with)."""
     tile = check_tile(z, x, y, settings.min_zoom, settings.max_zoom)

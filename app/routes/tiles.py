@@ -13,9 +13,8 @@ from app.http.disconnect import unless_client_goes
 from app.http.public_url import public_base_url
 from app.http.responses import accepts_gzip, body_response, etag_matches, make_etag
 from app.render.jobs import MorphJob, Rendered, TileJob
-from app.render.pool import RenderLanes, get_render_lanes
-from app.routes.dependencies import TileQuery, get_service, get_settings
-from app.routes.params import DatasetPath, TileX, TileY, TileZ, tile_responses
+from app.routes.dependencies import TileQuery
+from app.routes.params import DatasetPath, LanesDep, ServiceDep, SettingsDep, TileX, TileY, TileZ, tile_responses
 from app.service import DatasetService, lonlat_bounds
 from app.settings import Settings
 from engine.cartography.dataset import contour_fields, label_fields
@@ -59,9 +58,9 @@ async def get_tile(
     x: TileX,
     y: TileY,
     q: Annotated[TileQuery, Depends()],
-    service: Annotated[DatasetService, Depends(get_service)],
-    settings: Annotated[Settings, Depends(get_settings)],
-    lanes: Annotated[RenderLanes, Depends(get_render_lanes)],
+    service: ServiceDep,
+    settings: SettingsDep,
+    lanes: LanesDep,
 ) -> Response:
     """One Mapbox Vector Tile of a dataset's contours, generalized for the tile's (fractional) zoom."""
     renderer = service.renderer
@@ -113,9 +112,9 @@ async def get_morph_tile(
     z: Annotated[int, Path(description="Zoom level of the tile; it carries the morph over [z, z + 1).", ge=0, le=30)],
     x: TileX,
     y: TileY,
-    service: Annotated[DatasetService, Depends(get_service)],
-    settings: Annotated[Settings, Depends(get_settings)],
-    lanes: Annotated[RenderLanes, Depends(get_render_lanes)],
+    service: ServiceDep,
+    settings: SettingsDep,
+    lanes: LanesDep,
 ) -> Response:
     """One morph tile: the CCSM contours at both ends of the zoom level with the same vertices, and their t
     through the level, so a client draws every zoom inside the level without asking again
@@ -145,8 +144,8 @@ def server_timing(result: Rendered) -> str:
 def get_tilejson(
     request: Request,
     dataset: DatasetPath,
-    service: Annotated[DatasetService, Depends(get_service)],
-    settings: Annotated[Settings, Depends(get_settings)],
+    service: ServiceDep,
+    settings: SettingsDep,
 ) -> Response:
     """TileJSON 3.0.0 of a dataset: tile URL template (keeps this request's query string), bounds, layers."""
     return tilejson_response(request, dataset, "tiles", service, settings)
@@ -156,8 +155,8 @@ def get_tilejson(
 def get_morph_tilejson(
     request: Request,
     dataset: DatasetPath,
-    service: Annotated[DatasetService, Depends(get_service)],
-    settings: Annotated[Settings, Depends(get_settings)],
+    service: ServiceDep,
+    settings: SettingsDep,
 ) -> Response:
     """TileJSON 3.0.0 of a dataset's morph tiles (docs/morph-tiles.md): both layers and ``ccsm_morph``."""
     return tilejson_response(request, dataset, "morph", service, settings)
