@@ -21,6 +21,7 @@ from engine.serve.export import check_zoom_range, export_dataset, pyramid
 from engine.serve.renderer import Renderer
 from engine.store.records import DatasetInfo
 from engine.store.store import CCSStore
+from engine.tiles.archives import ArchiveMeta, open_archive
 from engine.tiles.grid import mercator_to_lonlat, tiles_covering
 from engine.types import Bounds
 
@@ -210,6 +211,15 @@ def test_a_failed_export_leaves_the_existing_file_and_no_temporary(
     assert len(calls) == 3  # it failed half way, after tiles were written to the temporary file
     assert out.read_bytes() == b"the previous archive"
     assert sorted(p.name for p in tmp_path.iterdir()) == [out.name]
+
+
+@pytest.mark.parametrize("suffix", [".pmtiles", ".mbtiles"])
+def test_an_archive_given_no_tile_is_refused_and_leaves_no_file(tmp_path: Path, suffix: str) -> None:
+    archive = open_archive(tmp_path / f"none{suffix}")
+    meta = ArchiveMeta("none", 0, 4, (7.0, 46.0, 8.0, 47.0), (7.5, 46.5, 2), [])
+    with pytest.raises(InvalidParameter, match="every tile is empty"):
+        archive.commit(meta)
+    assert list(tmp_path.iterdir()) == []
 
 
 @pytest.mark.parametrize(
