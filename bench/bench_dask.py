@@ -30,6 +30,8 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 sys.path.insert(0, str(REPO / "bench"))
 
+from support.processes import stop_process  # noqa: E402
+
 DASK = Path(sys.executable).with_name("dask")
 
 
@@ -64,12 +66,7 @@ def start_cluster(workers: int, logs: Path, env: dict[str, str]) -> tuple[str, l
 
 def stop(procs: list[subprocess.Popen[bytes]]) -> None:
     for proc in reversed(procs):
-        proc.terminate()
-        try:
-            proc.wait(20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        stop_process(proc)
 
 
 def cpu_seconds(proc: subprocess.Popen[bytes]) -> float:

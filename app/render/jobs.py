@@ -66,13 +66,19 @@ class RenderConfig:
 
 
 @dataclass(frozen=True)
-class TileJob:
-    """One per-level tile (every method)."""
+class _TileAddress:
+    """Which tile of which dataset: what every tile job starts with."""
 
     dataset: str
     z: int
     x: int
     y: int
+
+
+@dataclass(frozen=True)
+class TileJob(_TileAddress):
+    """One per-level tile (every method)."""
+
     zoom: float
     method: str
     t: float | None
@@ -81,25 +87,17 @@ class TileJob:
 
 
 @dataclass(frozen=True)
-class MorphJob:
+class MorphJob(_TileAddress):
     """One morph tile."""
 
-    dataset: str
-    z: int
-    x: int
-    y: int
     store: Path | None = None  # the store file the request's service reads (replicas switch files)
     gzip: bool = False  # the client accepts gzip: compress here, off the server's event loop
 
 
 @dataclass(frozen=True)
-class HillshadeJob:
+class HillshadeJob(_TileAddress):
     """One hillshade PNG tile of the DEM a dataset was made from (or given with)."""
 
-    dataset: str
-    z: int
-    x: int
-    y: int
     store: Path | None = None  # the store file the request's service reads (replicas switch files)
 
 

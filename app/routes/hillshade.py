@@ -2,17 +2,12 @@
 
 from __future__ import annotations
 
-from typing import Annotated
-
-from fastapi import APIRouter, Depends, Path, Request, Response
+from fastapi import APIRouter, Request, Response
 
 from app.http.disconnect import unless_client_goes
 from app.http.responses import etag_matches, make_etag
 from app.render.jobs import HillshadeJob
-from app.render.pool import RenderLanes, get_render_lanes
-from app.routes.dependencies import get_service, get_settings
-from app.service import DatasetService
-from app.settings import Settings
+from app.routes.params import DatasetPath, LanesDep, ServiceDep, SettingsDep, TileX, TileY, TileZ, tile_responses
 from engine.tiles.grid import check_tile
 
 router = APIRouter(tags=["tiles"])
@@ -21,24 +16,22 @@ router = APIRouter(tags=["tiles"])
 @router.get(
     "/hillshade/{dataset}/{z}/{x}/{y}.png",
     response_class=Response,
-    responses={
-        200: {"content": {"image/png": {}}, "description": "A 256 px grey hillshade tile (alpha 0 off the DEM)."},
-        204: {"description": "The tile misses the DEM."},
-        304: {"description": "Not modified (If-None-Match matched the ETag)."},
-        404: {"description": "Unknown dataset, a dataset without a DEM, or z/x/y outside the tile matrix."},
-        503: {"description": "Busy, or not drawn within the deadline (request_timeout_s); see Retry-After."},
-    },
+    responses=tile_responses(
+        {"content": {"image/png": {}}, "description": "A 256 px grey hillshade tile (alpha 0 off the DEM)."},
+        "The tile misses the DEM.",
+        "Unknown dataset, a dataset without a DEM, or z/x/y outside the tile matrix.",
+    ),
     name="get_hillshade_tile",
 )
 async def get_hillshade_tile(
     request: Request,
-    dataset: Annotated[str, Path(description="Dataset id (see GET /datasets).", max_length=64)],
-    z: Annotated[int, Path(description="Zoom level of the tile.", ge=0, le=30)],
-    x: Annotated[int, Path(description="Tile column, 0 at the antimeridian (west).", ge=0)],
-    y: Annotated[int, Path(description="Tile row, 0 at the north edge (XYZ scheme).", ge=0)],
-    service: Annotated[DatasetService, Depends(get_service)],
-    settings: Annotated[Settings, Depends(get_settings)],
-    lanes: Annotated[RenderLanes, Depends(get_render_lanes)],
+    dataset: DatasetPath,
+    z: TileZ,
+    x: TileX,
+    y: TileY,
+    service: ServiceDep,
+    settings: SettingsDep,
+    lanes: LanesDep,
 ) -> Response:
     """One hillshade tile of the DEM a dataset was made from (or was given with)."""
     tile = check_tile(z, x, y, settings.min_zoom, settings.max_zoom)

@@ -7,14 +7,14 @@ from pathlib import Path
 from typing import Annotated
 from urllib.parse import quote
 
-from fastapi import APIRouter, Depends, Request, Response
+from fastapi import APIRouter, Request, Response
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, JSONResponse
 
 from app.http.public_url import public_base_url
 from app.http.responses import etag_matches, make_etag
-from app.routes.dependencies import get_service, get_settings
-from app.service import DatasetService, lonlat_bounds
+from app.routes.params import DatasetPath, ServiceDep, SettingsDep
+from app.service import lonlat_bounds
 from app.settings import Settings
 from engine.cartography.glyphs import glyph_range_pbf
 from engine.cartography.schedule import NEVER, Schedule
@@ -31,9 +31,6 @@ GLYPHS_MAX_AGE_S = 86_400
 #: Glyph ranges kept in memory (each about 100 kB; MapLibre asks for one or two for Latin text).
 GLYPH_CACHE_RANGES = 16
 
-DatasetPath = Annotated[str, PathParam(description="Dataset id (see GET /datasets).", max_length=64)]
-
-
 def rank_fades(schedule: Schedule) -> list[RankFade]:
     """The fade range of each rank of a dataset's schedule (the top rank, at NEVER, never hides)."""
     return [
@@ -45,8 +42,8 @@ def rank_fades(schedule: Schedule) -> list[RankFade]:
 def get_style(
     request: Request,
     dataset: DatasetPath,
-    service: Annotated[DatasetService, Depends(get_service)],
-    settings: Annotated[Settings, Depends(get_settings)],
+    service: ServiceDep,
+    settings: SettingsDep,
 ) -> Response:
     """A complete MapLibre style v8 of a dataset: hillshade (with a DEM), contours by rank and index, labels."""
     version = service.require_ready(dataset)
@@ -121,7 +118,7 @@ def get_glyphs(
     request: Request,
     fontstack: Annotated[str, PathParam(description="Font stack: names joined by commas.", max_length=256)],
     glyph_range: Annotated[str, PathParam(description="Code point range, e.g. 0-255.", max_length=16)],
-    settings: Annotated[Settings, Depends(get_settings)],
+    settings: SettingsDep,
 ) -> Response:
     """Signed-distance-field glyphs (MapLibre's glyph protobuf) of the labels' font."""
     font = served_font(fontstack)
@@ -164,7 +161,7 @@ def get_webfont_css(
     request: Request,
     family: Annotated[str, PathParam(description="Font family, lower case with hyphens (dejavu-sans).")],
     variant: Annotated[str, PathParam(description="Weight and style, e.g. 400 or 400-italic (any is served).")],
-    settings: Annotated[Settings, Depends(get_settings)],
+    settings: SettingsDep,
 ) -> Response:
     """A CSS @font-face of the label font, so OpenLayers (ol-mapbox-style) draws labels in it without a CDN."""
     name = FONT_STACK.rsplit(" ", 1)[0]  # "DejaVu Sans"
@@ -181,7 +178,7 @@ def get_webfont_css(
 
 
 @router.get(FONT_FILE_PATH, response_class=FileResponse, name="get_label_font")
-def get_label_font(settings: Annotated[Settings, Depends(get_settings)]) -> FileResponse:
+def get_label_font(settings: SettingsDep) -> FileResponse:
     """The label font file itself (TrueType)."""
     return FileResponse(
         label_font_file(settings),

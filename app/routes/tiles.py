@@ -13,8 +13,8 @@ from app.http.disconnect import unless_client_goes
 from app.http.public_url import public_base_url
 from app.http.responses import accepts_gzip, body_response, etag_matches, make_etag
 from app.render.jobs import MorphJob, Rendered, TileJob
-from app.render.pool import RenderLanes, get_render_lanes
-from app.routes.dependencies import TileQuery, get_service, get_settings
+from app.routes.dependencies import TileQuery
+from app.routes.params import DatasetPath, LanesDep, ServiceDep, SettingsDep, TileX, TileY, TileZ, tile_responses
 from app.service import DatasetService, lonlat_bounds
 from app.settings import Settings
 from engine.cartography.dataset import contour_fields, label_fields
@@ -26,6 +26,8 @@ from engine.tiles.scale import zoom_for_scale
 router = APIRouter(tags=["tiles"])
 
 MVT_MEDIA_TYPE = "application/vnd.mapbox-vector-tile"
+#: The 404 of the vector and morph tiles.
+OUTSIDE_SERVED_TILES = "Unknown dataset, or z/x/y outside the tile matrix or the served zooms."
 
 #: The morph tile's extra fields, as TileJSON lists them (docs/morph-tiles.md).
 MORPH_FIELDS = {
@@ -40,31 +42,26 @@ MORPH_TILEJSON = {
     "end_layer": MORPH_END_LAYER,
 }
 
-DatasetPath = Annotated[str, Path(description="Dataset id (see GET /datasets).", max_length=64)]
-
-
 @router.get(
     "/tiles/{dataset}/{z}/{x}/{y}.mvt",
     response_class=Response,
-    responses={
-        200: {"content": {MVT_MEDIA_TYPE: {}}, "description": "The tile (one layer `contours`)."},
-        204: {"description": "No contour in this tile."},
-        304: {"description": "Not modified (If-None-Match matched the ETag)."},
-        404: {"description": "Unknown dataset, or z/x/y outside the tile matrix or the served zooms."},
-        503: {"description": "Busy, or not drawn within the deadline (request_timeout_s); see Retry-After."},
-    },
+    responses=tile_responses(
+        {"content": {MVT_MEDIA_TYPE: {}}, "description": "The tile (one layer `contours`)."},
+        "No contour in this tile.",
+        OUTSIDE_SERVED_TILES,
+    ),
     name="get_tile",
 )
 async def get_tile(
     request: Request,
     dataset: DatasetPath,
-    z: Annotated[int, Path(description="Zoom level of the tile.", ge=0, le=30)],
-    x: Annotated[int, Path(description="Tile column, 0 at the antimeridian (west).", ge=0)],
-    y: Annotated[int, Path(description="Tile row, 0 at the north edge (XYZ scheme).", ge=0)],
+    z: TileZ,
+    x: TileX,
+    y: TileY,
     q: Annotated[TileQuery, Depends()],
-    service: Annotated[DatasetService, Depends(get_service)],
-    settings: Annotated[Settings, Depends(get_settings)],
-    lanes: Annotated[RenderLanes, Depends(get_render_lanes)],
+    service: ServiceDep,
+    settings: SettingsDep,
+    lanes: LanesDep,
 ) -> Response:
     """One Mapbox Vector Tile of a dataset's contours, generalized for the tile's (fractional) zoom."""
     renderer = service.renderer
@@ -100,27 +97,25 @@ async def get_tile(
 @router.get(
     "/morph/{dataset}/{z}/{x}/{y}.mvt",
     response_class=Response,
-    responses={
-        200: {
+    responses=tile_responses(
+        {
             "content": {MVT_MEDIA_TYPE: {}},
             "description": "The morph tile: layers `contours` (at zoom z) and `contours_end` (at z + 1).",
         },
-        204: {"description": "No contour in this tile."},
-        304: {"description": "Not modified (If-None-Match matched the ETag)."},
-        404: {"description": "Unknown dataset, or z/x/y outside the tile matrix or the served zooms."},
-        503: {"description": "Busy, or not drawn within the deadline (request_timeout_s); see Retry-After."},
-    },
+        "No contour in this tile.",
+        OUTSIDE_SERVED_TILES,
+    ),
     name="get_morph_tile",
 )
 async def get_morph_tile(
     request: Request,
     dataset: DatasetPath,
     z: Annotated[int, Path(description="Zoom level of the tile; it carries the morph over [z, z + 1).", ge=0, le=30)],
-    x: Annotated[int, Path(description="Tile column, 0 at the antimeridian (west).", ge=0)],
-    y: Annotated[int, Path(description="Tile row, 0 at the north edge (XYZ scheme).", ge=0)],
-    service: Annotated[DatasetService, Depends(get_service)],
-    settings: Annotated[Settings, Depends(get_settings)],
-    lanes: Annotated[RenderLanes, Depends(get_render_lanes)],
+    x: TileX,
+    y: TileY,
+    service: ServiceDep,
+    settings: SettingsDep,
+    lanes: LanesDep,
 ) -> Response:
     """One morph tile: the CCSM contours at both ends of the zoom level with the same vertices, and their t
     through the level, so a client draws every zoom inside the level without asking again
@@ -150,8 +145,8 @@ def server_timing(result: Rendered) -> str:
 def get_tilejson(
     request: Request,
     dataset: DatasetPath,
-    service: Annotated[DatasetService, Depends(get_service)],
-    settings: Annotated[Settings, Depends(get_settings)],
+    service: ServiceDep,
+    settings: SettingsDep,
 ) -> Response:
     """TileJSON 3.0.0 of a dataset: tile URL template (keeps this request's query string), bounds, layers."""
     return tilejson_response(request, dataset, "tiles", service, settings)
@@ -161,8 +156,8 @@ def get_tilejson(
 def get_morph_tilejson(
     request: Request,
     dataset: DatasetPath,
-    service: Annotated[DatasetService, Depends(get_service)],
-    settings: Annotated[Settings, Depends(get_settings)],
+    service: ServiceDep,
+    settings: SettingsDep,
 ) -> Response:
     """TileJSON 3.0.0 of a dataset's morph tiles (docs/morph-tiles.md): both layers and ``ccsm_morph``."""
     return tilejson_response(request, dataset, "morph", service, settings)

@@ -13,6 +13,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from engine.baselines._wm_kernels import init_links
 from engine.baselines.common import count_schedule, min_vertices
 from engine.tolerances import tolerance_for_scale
 from engine.types import Coords
@@ -32,17 +33,22 @@ def _less(area: np.ndarray, i: int, j: int) -> bool:  # pragma: no cover - compi
 
 
 @njit(cache=True)
+def _swap(heap: np.ndarray, pos: np.ndarray, a: int, b: int) -> None:  # pragma: no cover - compiled
+    """Swap heap slots ``a`` and ``b``, keeping each vertex's slot in ``pos``."""
+    heap[a], heap[b] = heap[b], heap[a]
+    pos[heap[a]] = a
+    pos[heap[b]] = b
+
+
+@njit(cache=True)
 def _sift_up(heap: np.ndarray, pos: np.ndarray, area: np.ndarray, k: int) -> None:  # pragma: no cover
     """Move heap slot ``k`` up until its parent is smaller."""
     while k > 0:
         parent = (k - 1) // 2
-        if _less(area, heap[k], heap[parent]):
-            heap[k], heap[parent] = heap[parent], heap[k]
-            pos[heap[k]] = k
-            pos[heap[parent]] = parent
-            k = parent
-        else:
+        if not _less(area, heap[k], heap[parent]):
             break
+        _swap(heap, pos, k, parent)
+        k = parent
 
 
 @njit(cache=True)
@@ -57,13 +63,10 @@ def _sift_down(
         child = left
         if left + 1 < size and _less(area, heap[left + 1], heap[left]):
             child = left + 1
-        if _less(area, heap[child], heap[k]):
-            heap[k], heap[child] = heap[child], heap[k]
-            pos[heap[k]] = k
-            pos[heap[child]] = child
-            k = child
-        else:
+        if not _less(area, heap[child], heap[k]):
             break
+        _swap(heap, pos, k, child)
+        k = child
 
 
 @njit(cache=True)
@@ -90,14 +93,7 @@ def vw_removal(xy: np.ndarray, closed: bool) -> tuple[np.ndarray, np.ndarray]:  
     eff = np.full(n, np.inf)
     rank = np.full(n, -1, np.int64)
     key = np.full(n, np.inf)
-    prv = np.empty(n, np.int64)
-    nxt = np.empty(n, np.int64)
-    for i in range(n):
-        prv[i] = i - 1
-        nxt[i] = i + 1
-    if closed:
-        prv[0] = n - 1
-        nxt[n - 1] = 0
+    prv, nxt = init_links(n, closed)
     floor = 3 if closed else 2
     heap = np.empty(n, np.int64)
     pos = np.full(n, -1, np.int64)

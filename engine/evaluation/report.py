@@ -65,6 +65,22 @@ def _pyplot() -> Any:  # matplotlib.pyplot, a module: imported late so the engin
     return plt
 
 
+def _save_figure(plt: Any, fig: Any, path: Path) -> None:
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)  # pyplot keeps every open figure alive until it is closed
+
+
+def _finish_level_plot(plt: Any, ax: Any, path: Path, *, xlabel: str, ylabel: str, title: str) -> None:
+    # The line plots over the levels (one line per method) share their look: grid, legend.
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend()
+    _save_figure(plt, ax.figure, path)
+
+
 def headline_levels(levels: int) -> list[int]:
     """1-based levels the summary lists: 1, 25, 50, 75, 100 scaled to ``levels``."""
     return sorted({max(1, min(levels, round(k * levels / 100))) for k in HEADLINE_LEVELS})
@@ -92,14 +108,14 @@ def write_report(
     fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
     for k, m in enumerate(methods):
         ax.plot(lv, mean[k], label=LABELS[m], color=COLOURS[m], lw=1.8 if m == "ccsm" else 1.3)
-    ax.set_xlabel(f"level i (1 = initial contour, {ev.levels} = most simplified)")
-    ax.set_ylabel("mean similarity")
-    ax.set_title(f"Fig. 10: shape similarity by level ({n} contours)")
-    ax.grid(alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(out / "fig10_similarity.png")
-    plt.close(fig)
+    _finish_level_plot(
+        plt,
+        ax,
+        out / "fig10_similarity.png",
+        xlabel=f"level i (1 = initial contour, {ev.levels} = most simplified)",
+        ylabel="mean similarity",
+        title=f"Fig. 10: shape similarity by level ({n} contours)",
+    )
 
     # Jumps
     cj = ev.contour_jumps()
@@ -154,9 +170,7 @@ def write_report(
     axes[1].set_yscale("log")
     axes[1].legend(fontsize=8)
     axes[1].grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(out / "fig_jumps.png")
-    plt.close(fig)
+    _save_figure(plt, fig, out / "fig_jumps.png")
 
     # Crossings
     _write_csv(
@@ -171,14 +185,14 @@ def write_report(
     for m in methods:
         rows = [r for r in ev.crossings if r[0] == m]
         ax.plot([r[1] + 1 for r in rows], [r[2] for r in rows], color=COLOURS[m], label=LABELS[m], marker=".")
-    ax.set_xlabel("level i")
-    ax.set_ylabel("pairs of contours that meet or cross")
-    ax.set_title(f"Crossings between different contours ({n} contours)")
-    ax.grid(alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(out / "fig_crossings.png")
-    plt.close(fig)
+    _finish_level_plot(
+        plt,
+        ax,
+        out / "fig_crossings.png",
+        xlabel="level i",
+        ylabel="pairs of contours that meet or cross",
+        title=f"Crossings between different contours ({n} contours)",
+    )
 
     # Table 2, Fig. 11, Table 3
     tables = ev.table_contours
@@ -240,9 +254,7 @@ def write_report(
     ax.set_yscale("log")
     ax.set_title("Fig. 11: linear density at the same scale")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out / "fig11_linear_density.png")
-    plt.close(fig)
+    _save_figure(plt, fig, out / "fig11_linear_density.png")
     errors = pooled_errors(tables)
     _write_csv(
         out / "table3_positional_error.csv",

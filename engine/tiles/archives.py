@@ -163,29 +163,58 @@ def check_writable(path: str | os.PathLike[str]) -> None:
     tmp.unlink(missing_ok=True)
 
 
-class PMTilesArchive:
-    """A PMTiles v3 archive of gzip-compressed MVT tiles being written (see the module docstring)."""
+class _ArchiveWriter:
+    """What both archive writers do alike: count the tiles added, refuse to commit none, give the size.
+
+    A writer puts a tile with ``_put`` and finishes the temporary file and renames it over ``path`` with
+    ``_finish`` (calling ``abort`` itself if that fails).
+    """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = Path(path)
         self.tmp = _check_target(self.path)
+        self.tiles = 0
+
+    def add(self, z: int, x: int, y: int, data: bytes) -> None:
+        """Add one gzip-compressed MVT (in tile-id order for a clustered PMTiles archive)."""
+        self._put(z, x, y, data)
+        self.tiles += 1
+
+    def commit(self, meta: ArchiveMeta) -> int:
+        """Write what the format keeps beside the tiles, then rename over ``path``; returns the size in bytes."""
+        if self.tiles == 0:
+            self.abort()
+            raise InvalidParameter(f"nothing to write to {self.path.name}: every tile is empty")
+        self._finish(meta)
+        return self.path.stat().st_size
+
+    def abort(self) -> None:
+        """Close and remove the temporary file."""
+        raise NotImplementedError
+
+    def _put(self, z: int, x: int, y: int, data: bytes) -> None:
+        raise NotImplementedError
+
+    def _finish(self, meta: ArchiveMeta) -> None:
+        raise NotImplementedError
+
+
+class PMTilesArchive(_ArchiveWriter):
+    """A PMTiles v3 archive of gzip-compressed MVT tiles being written (see the module docstring)."""
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        super().__init__(path)
         try:
             self._file: BinaryIO = open(self.tmp, "wb")  # noqa: SIM115 - closed by commit/abort
         except OSError as exc:
             raise InvalidParameter(f"cannot write {self.path}: {exc.strerror or exc}") from None
         self._writer = Writer(self._file)
-        self.tiles = 0
 
-    def add(self, z: int, x: int, y: int, data: bytes) -> None:
-        """Add one gzip-compressed MVT (in tile-id order for a clustered archive)."""
+    def _put(self, z: int, x: int, y: int, data: bytes) -> None:
         self._writer.write_tile(tile_id(z, x, y), data)
-        self.tiles += 1
 
-    def commit(self, meta: ArchiveMeta) -> int:
-        """Write directories, metadata and header, then rename over ``path``; returns the size in bytes."""
-        if self.tiles == 0:
-            self.abort()
-            raise InvalidParameter(f"nothing to write to {self.path.name}: every tile is empty")
+    def _finish(self, meta: ArchiveMeta) -> None:
+        # Directories, metadata and header.
         west, south, east, north = meta.bounds
         header: dict[str, Any] = {
             "tile_type": TileType.MVT,
@@ -212,7 +241,6 @@ class PMTilesArchive:
         except OSError as exc:
             self.abort()
             raise InvalidParameter(f"cannot write {self.path}: {exc.strerror or exc}") from None
-        return self.path.stat().st_size
 
     def abort(self) -> None:
         """Close and remove the temporary file."""
@@ -241,13 +269,11 @@ def tms_row(z: int, y: int) -> int:
     return (1 << z) - 1 - y
 
 
-class MBTilesArchive:
+class MBTilesArchive(_ArchiveWriter):
     """An MBTiles 1.3 file of gzip-compressed MVT tiles being written (see the module docstring)."""
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
-        self.path = Path(path)
-        self.tmp = _check_target(self.path)
-        self.tiles = 0
+        super().__init__(path)
         try:
             self.tmp.unlink(missing_ok=True)
             self._con = sqlite3.connect(self.tmp, isolation_level=None)
@@ -259,16 +285,11 @@ class MBTilesArchive:
             self.tmp.unlink(missing_ok=True)
             raise InvalidParameter(f"cannot write {self.path}: {exc}") from None
 
-    def add(self, z: int, x: int, y: int, data: bytes) -> None:
-        """Add one gzip-compressed MVT under its TMS row."""
-        self._con.execute("INSERT INTO tiles VALUES (?, ?, ?, ?)", (z, x, tms_row(z, y), data))
-        self.tiles += 1
+    def _put(self, z: int, x: int, y: int, data: bytes) -> None:
+        self._con.execute("INSERT INTO tiles VALUES (?, ?, ?, ?)", (z, x, tms_row(z, y), data))  # its TMS row
 
-    def commit(self, meta: ArchiveMeta) -> int:
-        """Write the metadata, close and rename over ``path``; returns the size in bytes."""
-        if self.tiles == 0:
-            self.abort()
-            raise InvalidParameter(f"nothing to write to {self.path.name}: every tile is empty")
+    def _finish(self, meta: ArchiveMeta) -> None:
+        # The metadata table, then close.
         west, south, east, north = meta.bounds
         rows = {
             "name": meta.name,
@@ -292,7 +313,6 @@ class MBTilesArchive:
         except (OSError, sqlite3.Error) as exc:
             self.abort()
             raise InvalidParameter(f"cannot write {self.path}: {exc}") from None
-        return self.path.stat().st_size
 
     def abort(self) -> None:
         """Close and remove the temporary file."""

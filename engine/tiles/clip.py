@@ -6,6 +6,8 @@ The edge arithmetic follows GEOS's rectangle clipping, so the pieces equal what 
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
@@ -120,13 +122,7 @@ def clip_lines_fast(
     q: NDArray[np.int64], lens: NDArray[np.int64], lo: int, hi: int
 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
     """:func:`clip_lines` in one compiled Liang–Barsky pass (the same pieces; no shapely objects)."""
-    q = np.ascontiguousarray(q, dtype=np.int64)
-    lens = np.ascontiguousarray(lens, dtype=np.int64)
-    out = np.empty((2 * len(q) + 2, 2), dtype=np.int64)
-    out_len = np.empty(len(q) + 1, dtype=np.int64)
-    out_src = np.empty(len(q) + 1, dtype=np.int64)
-    n, m = _clip_kernel(q, lens, float(lo), float(hi), out, out_len, out_src, True)
-    return out[:n], out_len[:m], out_src[:m]
+    return _clip(np.ascontiguousarray(q, dtype=np.int64), lens, lo, hi, to_grid=True)
 
 
 def clip_lines_exact(
@@ -134,10 +130,16 @@ def clip_lines_exact(
 ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]:
     """:func:`clip_lines_fast` of float polylines, keeping the cut points as they are (not rounded): the
     pieces of exact lines that snap rounding then puts on the grid (engine.tiles.snap_round)."""
-    q = np.ascontiguousarray(q, dtype=np.float64)
+    return _clip(np.ascontiguousarray(q, dtype=np.float64), lens, lo, hi, to_grid=False)
+
+
+def _clip(
+    q: NDArray[Any], lens: NDArray[np.int64], lo: float, hi: float, *, to_grid: bool
+) -> tuple[NDArray[Any], NDArray[np.int64], NDArray[np.int64]]:
+    # The kernel cuts float or integer lines alike; to_grid rounds the cut points to the grid.
     lens = np.ascontiguousarray(lens, dtype=np.int64)
-    out = np.empty((2 * len(q) + 2, 2), dtype=np.float64)
+    out = np.empty((2 * len(q) + 2, 2), dtype=q.dtype)
     out_len = np.empty(len(q) + 1, dtype=np.int64)
     out_src = np.empty(len(q) + 1, dtype=np.int64)
-    n, m = _clip_kernel(q, lens, float(lo), float(hi), out, out_len, out_src, False)
+    n, m = _clip_kernel(q, lens, float(lo), float(hi), out, out_len, out_src, to_grid)
     return out[:n], out_len[:m], out_src[:m]

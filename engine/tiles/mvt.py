@@ -108,6 +108,13 @@ def _zigzag(d: np.int64) -> np.uint64:  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def _put_step(out, pos, dx, dy):  # pragma: no cover - compiled
+    # A command's parameters: the move from the cursor to the point, zigzag varints.
+    pos = _put_varint(out, pos, _zigzag(dx))
+    return _put_varint(out, pos, _zigzag(dy))
+
+
+@njit(cache=True)
 def _geometry_kernel(pts, part_lens, first, out, part_start):  # pragma: no cover - compiled
     pos = 0
     p = 0
@@ -120,20 +127,14 @@ def _geometry_kernel(pts, part_lens, first, out, part_start):  # pragma: no cove
         part_start[j] = pos
         n = part_lens[j]
         pos = _put_varint(out, pos, np.uint64(9))  # MoveTo (1) with count 1
-        x = pts[p, 0]
-        y = pts[p, 1]
-        pos = _put_varint(out, pos, _zigzag(x - cx))
-        pos = _put_varint(out, pos, _zigzag(y - cy))
-        cx = x
-        cy = y
+        pos = _put_step(out, pos, pts[p, 0] - cx, pts[p, 1] - cy)
+        cx = pts[p, 0]
+        cy = pts[p, 1]
         pos = _put_varint(out, pos, np.uint64(((n - 1) << 3) | 2))  # LineTo (2) with count n - 1
         for i in range(p + 1, p + n):
-            x = pts[i, 0]
-            y = pts[i, 1]
-            pos = _put_varint(out, pos, _zigzag(x - cx))
-            pos = _put_varint(out, pos, _zigzag(y - cy))
-            cx = x
-            cy = y
+            pos = _put_step(out, pos, pts[i, 0] - cx, pts[i, 1] - cy)
+            cx = pts[i, 0]
+            cy = pts[i, 1]
         p += n
     part_start[len(part_lens)] = pos
     return pos

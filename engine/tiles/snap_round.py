@@ -79,6 +79,17 @@ def _emit(out, n, start, i, j):  # pragma: no cover - compiled
     return n + 1
 
 
+@njit(cache=True, inline="always")
+def _first_boundary(u, c, d):  # pragma: no cover - compiled
+    # Parameter along the segment at which it reaches the next pixel boundary on one axis (u in pixel c,
+    # moving d along it over the whole segment), and the parameter step from one boundary to the next.
+    if d > 0:
+        return (c + 1 - u) / d, 1.0 / d
+    if d < 0:
+        return (u - c) / -d, 1.0 / -d
+    return np.inf, np.inf
+
+
 @njit(cache=True)
 def _walk_segment(table, px, py, qx, qy, out, n, start):  # noqa: C901  # pragma: no cover - compiled
     """Emit the centres of the hot pixels the segment p -> q passes through after p's own pixel, in order."""
@@ -88,19 +99,8 @@ def _walk_segment(table, px, py, qx, qy, out, n, start):  # noqa: C901  # pragma
     dx, dy = qx - px, qy - py
     sx = np.int64(1) if dx > 0 else np.int64(-1)
     sy = np.int64(1) if dy > 0 else np.int64(-1)
-    # Parameter along the segment at which it reaches the next vertical / horizontal pixel boundary.
-    if dx > 0:
-        tx, step_x = (cx + 1 - ux) / dx, 1.0 / dx
-    elif dx < 0:
-        tx, step_x = (ux - cx) / -dx, 1.0 / -dx
-    else:
-        tx, step_x = np.inf, np.inf
-    if dy > 0:
-        ty, step_y = (cy + 1 - uy) / dy, 1.0 / dy
-    elif dy < 0:
-        ty, step_y = (uy - cy) / -dy, 1.0 / -dy
-    else:
-        ty, step_y = np.inf, np.inf
+    tx, step_x = _first_boundary(ux, cx, dx)
+    ty, step_y = _first_boundary(uy, cy, dy)
     left = abs(ex - cx) + abs(ey - cy)
     while left > 0:
         if cx == ex:

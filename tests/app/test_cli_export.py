@@ -14,10 +14,10 @@ import mapbox_vector_tile
 import pytest
 from pmtiles.reader import MmapSource, Reader, all_tiles
 from pmtiles.tile import Compression, TileType
+from support.export import fail_render_batch_after
 from support.node import NODE_DIR, node_available
 from typer.testing import CliRunner
 
-import engine.serve.export as export_mod
 from app.cli import _register_commands, app
 from engine.errors import InvalidParameter
 from engine.serve.renderer import Renderer
@@ -220,16 +220,7 @@ def test_a_failed_export_keeps_the_existing_file(
     out.write_bytes(b"yesterday's archive")
     bad = run("export", "hills", "--store", built_store, "-o", out, "--minzoom", "5", "--maxzoom", "4")
     assert bad.exit_code == 2 and out.read_bytes() == b"yesterday's archive"
-    real = export_mod.render_batch
-    calls = []
-
-    def failing(*args, **kwargs):  # type: ignore[no-untyped-def]
-        calls.append(1)
-        if len(calls) > 1:
-            raise InvalidParameter("the renderer gave up")
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(export_mod, "render_batch", failing)
+    calls = fail_render_batch_after(monkeypatch, 1, InvalidParameter("the renderer gave up"))
     result = run("export", "hills", "--store", built_store, "-o", out, "--workers", "1", "--maxzoom", "12")
     assert result.exit_code == 2, result.output
     assert "the renderer gave up" in result.stderr and len(calls) == 2

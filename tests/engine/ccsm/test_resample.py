@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 import shapely
@@ -9,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
-from engine.ccsm.resample import correspond, densify_path
+from engine.ccsm.resample import Correspondence, correspond, densify_path
 from engine.errors import InvalidContour, InvalidParameter
 from engine.geom.douglas_peucker import douglas_peucker
 from engine.geom.polyline import closed_path
@@ -39,37 +41,28 @@ def line_with_characteristic(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, f
     return path + [750_000.0, 4_060_000.0], keep, spacing
 
 
-@given(line_with_characteristic())
-@HYPOTHESIS
-def test_correspond_keeps_every_vertex_of_l0_in_order(case: tuple[np.ndarray, np.ndarray, float]) -> None:
-    path, keep, spacing = case
-    initial = correspond(path, keep, spacing).initial
+# -- properties of every correspondence, each checked on the same generated lines -----------------------------
+
+
+def keeps_every_vertex_of_l0_in_order(path: np.ndarray, keep: np.ndarray, spacing: float, corr: Correspondence) -> None:
     position = 0
     for vertex in path:  # each vertex appears, in order, among the samples
-        hits = np.flatnonzero(np.all(initial[position:] == vertex, axis=1))
+        hits = np.flatnonzero(np.all(corr.initial[position:] == vertex, axis=1))
         assert len(hits) > 0
         position += int(hits[0]) + 1
 
 
-@given(line_with_characteristic())
-@HYPOTHESIS
-def test_correspond_characteristic_samples_coincide_on_both_sides(
-    case: tuple[np.ndarray, np.ndarray, float],
+def characteristic_samples_coincide_on_both_sides(
+    path: np.ndarray, keep: np.ndarray, spacing: float, corr: Correspondence
 ) -> None:
-    path, keep, spacing = case
-    corr = correspond(path, keep, spacing)
     assert len(corr.characteristic) == len(keep)
     assert_allclose(corr.initial[corr.characteristic], path[keep], rtol=0, atol=1e-9)
     assert_allclose(corr.target[corr.characteristic], path[keep], rtol=0, atol=1e-6)
 
 
-@given(line_with_characteristic())
-@HYPOTHESIS
-def test_correspond_target_samples_lie_on_the_segments_between_characteristic_points(
-    case: tuple[np.ndarray, np.ndarray, float],
+def target_samples_lie_on_the_segments_between_characteristic_points(
+    path: np.ndarray, keep: np.ndarray, spacing: float, corr: Correspondence
 ) -> None:
-    path, keep, spacing = case
-    corr = correspond(path, keep, spacing)
     for piece in range(len(keep) - 1):
         lo, hi = corr.characteristic[piece], corr.characteristic[piece + 1]
         segment = shapely.LineString(path[[keep[piece], keep[piece + 1]]])
@@ -77,31 +70,43 @@ def test_correspond_target_samples_lie_on_the_segments_between_characteristic_po
             assert segment.distance(shapely.Point(point)) <= 1e-6
 
 
-@given(line_with_characteristic())
-@HYPOTHESIS
-def test_correspond_gives_equal_counts_and_gaps_within_spacing(
-    case: tuple[np.ndarray, np.ndarray, float],
+def equal_counts_and_gaps_within_spacing(
+    path: np.ndarray, keep: np.ndarray, spacing: float, corr: Correspondence
 ) -> None:
-    path, keep, spacing = case
-    corr = correspond(path, keep, spacing)
     assert corr.initial.shape == corr.target.shape
     gaps = np.hypot(*np.diff(corr.initial, axis=0).T)
     assert gaps.max() <= spacing * (1 + 1e-9)
 
 
-@given(line_with_characteristic())
-@HYPOTHESIS
-def test_correspond_target_advances_in_proportion_to_arc_length_on_l0(
-    case: tuple[np.ndarray, np.ndarray, float],
+def target_advances_in_proportion_to_arc_length_on_l0(
+    path: np.ndarray, keep: np.ndarray, spacing: float, corr: Correspondence
 ) -> None:
-    path, keep, spacing = case
-    corr = correspond(path, keep, spacing)
     for piece in range(len(keep) - 1):
         lo, hi = corr.characteristic[piece], corr.characteristic[piece + 1]
         l0 = np.hypot(*np.diff(corr.initial[lo : hi + 1], axis=0).T)
         ln = np.hypot(*np.diff(corr.target[lo : hi + 1], axis=0).T)
         chord = np.hypot(*(path[keep[piece + 1]] - path[keep[piece]]))
         assert_allclose(ln, l0 / l0.sum() * chord, rtol=1e-6, atol=1e-6)
+
+
+CORRESPONDENCE_PROPERTIES = [
+    keeps_every_vertex_of_l0_in_order,
+    characteristic_samples_coincide_on_both_sides,
+    target_samples_lie_on_the_segments_between_characteristic_points,
+    equal_counts_and_gaps_within_spacing,
+    target_advances_in_proportion_to_arc_length_on_l0,
+]
+
+
+@pytest.mark.parametrize("holds", CORRESPONDENCE_PROPERTIES, ids=lambda holds: holds.__name__)
+@given(line_with_characteristic())
+@HYPOTHESIS
+def test_correspond(
+    holds: Callable[[np.ndarray, np.ndarray, float, Correspondence], None],
+    case: tuple[np.ndarray, np.ndarray, float],
+) -> None:
+    path, keep, spacing = case
+    holds(path, keep, spacing, correspond(path, keep, spacing))
 
 
 def test_densify_path_splits_a_long_edge_into_equal_pieces() -> None:

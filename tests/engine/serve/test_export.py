@@ -12,6 +12,7 @@ import mapbox_vector_tile
 import pytest
 from pmtiles.reader import MmapSource, Reader, all_tiles
 from pmtiles.tile import Compression, TileType, zxy_to_tileid
+from support.export import fail_render_batch_after
 
 import engine.serve.export as export_mod
 from engine.build.datasets import SourceSpec, build_dataset
@@ -20,6 +21,7 @@ from engine.serve.export import check_zoom_range, export_dataset, pyramid
 from engine.serve.renderer import Renderer
 from engine.store.records import DatasetInfo
 from engine.store.store import CCSStore
+from engine.tiles.archives import ArchiveMeta, open_archive
 from engine.tiles.grid import mercator_to_lonlat, tiles_covering
 from engine.types import Bounds
 
@@ -203,21 +205,21 @@ def test_a_failed_export_leaves_the_existing_file_and_no_temporary(
 ) -> None:
     out = tmp_path / f"old{suffix}"
     out.write_bytes(b"the previous archive")
-    calls = []
-    real = export_mod.render_batch
-
-    def failing(*args, **kwargs):  # type: ignore[no-untyped-def]
-        calls.append(1)
-        if len(calls) > 2:
-            raise RuntimeError("disk on fire")
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(export_mod, "render_batch", failing)
+    calls = fail_render_batch_after(monkeypatch, 2, RuntimeError("disk on fire"))
     with pytest.raises(RuntimeError, match="disk on fire"):
         export_dataset(store, DATASET, out, workers=1, batch_size=2)
     assert len(calls) == 3  # it failed half way, after tiles were written to the temporary file
     assert out.read_bytes() == b"the previous archive"
     assert sorted(p.name for p in tmp_path.iterdir()) == [out.name]
+
+
+@pytest.mark.parametrize("suffix", [".pmtiles", ".mbtiles"])
+def test_an_archive_given_no_tile_is_refused_and_leaves_no_file(tmp_path: Path, suffix: str) -> None:
+    archive = open_archive(tmp_path / f"none{suffix}")
+    meta = ArchiveMeta("none", 0, 4, (7.0, 46.0, 8.0, 47.0), (7.5, 46.5, 2), [])
+    with pytest.raises(InvalidParameter, match="every tile is empty"):
+        archive.commit(meta)
+    assert list(tmp_path.iterdir()) == []
 
 
 @pytest.mark.parametrize(
