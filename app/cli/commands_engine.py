@@ -23,6 +23,8 @@ from rich.table import Table
 
 from app.cli import app
 from app.cli.contour_issues import issues_phrase, report_contour_issues
+from app.cli.lazy_progress import LazyProgress
+from app.cli.messages import cli_message
 from engine.errors import CCSMError
 from engine.types import BadFeature
 
@@ -52,7 +54,7 @@ def bad_input_exits() -> Iterator[None]:
     try:
         yield
     except CCSMError as exc:
-        fail(str(exc))
+        fail(cli_message(exc))
 
 
 def check_scale(name: str, value: float) -> float:
@@ -292,11 +294,8 @@ def build_into_cache(
         cache = _open_cache(store_path, is_default=store is None)
     except OSError as exc:
         fail(f"cannot open the store {store_path}: {exc.strerror or exc}")
-    with _progress() as progress:
-        task = progress.add_task("building surfaces", total=None)
-        info, _ = build_dataset(
-            cache, spec, workers=workers, progress=lambda d, t: progress.update(task, completed=d, total=t)
-        )
+    with LazyProgress(_progress, "building surfaces") as progress:  # drawn once the source is read
+        info, _ = build_dataset(cache, spec, workers=workers, progress=progress.update)
     return cache, info
 
 

@@ -42,6 +42,7 @@ from app.cli.commands_engine import (
     fail,
 )
 from app.cli.contour_issues import issues_phrase, report_contour_issues
+from app.cli.lazy_progress import LazyProgress
 
 
 def _progress() -> Progress:
@@ -162,8 +163,7 @@ def export(
             dataset_id = dataset if dataset is not None else str(source)
             store_path = store or _service_store()
             _stored_dataset(store_path, dataset_id, source if source is not None else f"--dataset {dataset_id}")
-        with _progress() as progress:
-            task = progress.add_task(f"tiles z{minzoom}-{maxzoom}", total=None)
+        with LazyProgress(_progress, f"tiles z{minzoom}-{maxzoom}") as progress:  # drawn once tiles are counted
             result = export_dataset(
                 store_path,
                 dataset_id,
@@ -171,7 +171,7 @@ def export(
                 minzoom=minzoom,
                 maxzoom=maxzoom,
                 workers=workers,
-                progress=lambda d, t: progress.update(task, completed=d, total=t),
+                progress=progress.update,
             )
     from engine.store.store import CCSStore
 

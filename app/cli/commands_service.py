@@ -149,6 +149,7 @@ def build(
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    from app.cli.lazy_progress import LazyProgress
     from app.service import SAMPLE_ID, SAMPLE_NAME, build_lock
     from app.settings import Settings
     from engine.errors import CCSMError
@@ -181,21 +182,19 @@ def build(
     console.print(f"building {spec.dataset} from {spec.path.name} into {store_path}")
     try:
         ccs_store = CCSStore(store_path)
+        bar = Progress(
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            console=console,
+            transient=False,
+        )
         with (
             build_lock(store_path),
-            Progress(
-                TextColumn("[bold]{task.description}"),
-                BarColumn(),
-                MofNCompleteColumn(),
-                TimeElapsedColumn(),
-                console=console,
-                transient=False,
-            ) as progress,
+            LazyProgress(lambda: bar, f"building {spec.dataset}") as progress,  # drawn once the source is read
         ):
-            task = progress.add_task(f"building {spec.dataset}", total=None)
-
-            def report(done: int, total: int) -> None:
-                progress.update(task, completed=done, total=total)
+            report = progress.update
 
             with build_executor(scheduler, workers or settings.build_workers) as executor:
                 info, rebuilt = build_dataset(
@@ -203,7 +202,9 @@ def build(
                     executor=executor,
                 )
     except CCSMError as exc:
-        console.print(f"[red]error:[/red] {exc}")
+        from app.cli.messages import cli_message
+
+        console.print(f"[red]error:[/red] {cli_message(exc)}", highlight=False, soft_wrap=True)
         raise typer.Exit(2) from None
     verb = "built" if rebuilt else "already current:"
     from app.cli.contour_issues import issues_phrase, report_contour_issues
