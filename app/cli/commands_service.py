@@ -144,6 +144,15 @@ def build(
             "--block", min=2, help="GeoTIFF / .asc: trace in windows of this many cells a side [by size]."
         ),
     ] = None,
+    report: Annotated[
+        Path | None,
+        typer.Option(
+            "--report",
+            help="Write every skipped feature and every contour issue to FILE (.json or .csv); the terminal "
+            "summarises them.",
+            metavar="FILE",
+        ),
+    ] = None,
 ) -> None:
     """Precompute a source into the store without serving (one transaction: a killed build changes nothing)."""
     from rich.console import Console
@@ -157,6 +166,11 @@ def build(
     from engine.store.store import CCSStore
 
     console = Console(stderr=True)
+    from app.cli.run_report import report_problem
+
+    if (problem := report_problem(report)) is not None:
+        console.print(f"[red]error:[/red] {problem}", highlight=False, soft_wrap=True)
+        raise typer.Exit(2)
     if scheduler is not None:
         console.print(f"building on the Dask cluster at {scheduler}")
     settings = Settings()
@@ -194,11 +208,9 @@ def build(
             build_lock(store_path),
             LazyProgress(lambda: bar, f"building {spec.dataset}") as progress,  # drawn once the source is read
         ):
-            report = progress.update
-
             with build_executor(scheduler, workers or settings.build_workers) as executor:
                 info, rebuilt = build_dataset(
-                    ccs_store, spec, workers=workers or settings.build_workers, progress=report, force=force,
+                    ccs_store, spec, workers=workers or settings.build_workers, progress=progress.update, force=force,
                     executor=executor,
                 )
     except CCSMError as exc:
@@ -207,9 +219,11 @@ def build(
         console.print(f"[red]error:[/red] {cli_message(exc)}", highlight=False, soft_wrap=True)
         raise typer.Exit(2) from None
     verb = "built" if rebuilt else "already current:"
-    from app.cli.contour_issues import issues_phrase, report_contour_issues
+    from app.cli.contour_issues import issues_phrase, report_contour_issues, report_skipped_features, write_report
 
-    issues = report_contour_issues(console, ccs_store, info.id)
+    report_skipped_features(console, info.bad_features, report)
+    issues = report_contour_issues(console, ccs_store, info.id, report)
+    write_report(report, ccs_store, info.id, str(spec.path), info.bad_features)
     console.print(
         f"{verb} {info.id} -> {store_path} ({info.n_contours} contours, {info.n_vertices} vertices, "
         f"data_version {info.data_version}, {len(info.bad_features)} bad features, {issues_phrase(issues)})"
