@@ -30,7 +30,12 @@ ElevOpt = Annotated[
     str | None, typer.Option("--elevation-field", help="Elevation attribute of contour files.")
 ]
 IntervalOpt = Annotated[
-    float | None, typer.Option("--interval", min=0.0, help="Contour interval (required for a DEM).")
+    float | None,
+    typer.Option(
+        "--interval",
+        min=0.0,
+        help="Contour interval, in the source's vertical unit [contour files: from their levels; needed for a DEM].",
+    ),
 ]
 SourceScaleOpt = Annotated[
     float | None, typer.Option("--source-scale", help="Scale denominator of the source (t = 0) [50000].")
