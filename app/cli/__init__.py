@@ -12,7 +12,8 @@ import typer
 
 app = typer.Typer(
     name="ccsm",
-    help="Continuously generalized terrain contours (CCSM, Qian et al. 2021): simplify, evaluate, build, export and serve tiles.",
+    help="Continuously generalized terrain contours (CCSM, Qian et al. 2021): simplify, evaluate, build, export "
+    "and serve tiles.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
