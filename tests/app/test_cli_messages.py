@@ -227,8 +227,8 @@ def test_help_lists_every_command_with_its_whole_summary() -> None:
 def test_serve_help_says_what_interval_defaults_to() -> None:
     done = ccsm("serve", "--help", columns=200)
     assert done.returncode == 0, done.stderr
-    line = next(line for line in done.stdout.splitlines() if "--interval" in line)
-    assert "[contour files: from their levels; needed for a DEM]" in line, line
+    option = one_line(done.stdout).split("--interval", 1)[1].split(" --", 1)[0]
+    assert "[contour files: from their levels; needed for a DEM]" in option, option
 
 
 def test_make_install_says_what_each_one_time_step_does_before_it() -> None:
