@@ -57,13 +57,17 @@ $(BIN)/pip:
 	$(PYTHON) -m venv $(VENV)
 
 # Reinstalls only when the venv, pyproject.toml or an npm manifest changes.
+# Each one-time step says what it does and about how long it takes first (a fresh make run is ~2.5 minutes).
 .install-stamp: $(BIN)/pip pyproject.toml $(foreach d,$(NPM_DIRS),$(wildcard $(d)/package.json $(d)/package-lock.json)) | need-node
+	@echo "installing Python packages into $(VENV) (one time, ~1 min)"
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e ".[dev]"
 	@for d in $(NPM_DIRS); do \
-	  if [ -f $$d/package.json ]; then echo "npm ci in $$d"; (cd $$d && npm ci --no-audit --no-fund --loglevel=error) || exit 1; fi; \
+	  if [ -f $$d/package.json ]; then echo "installing JavaScript packages in $$d: npm ci (one time, ~15 s)"; (cd $$d && npm ci --no-audit --no-fund --loglevel=error) || exit 1; fi; \
 	done
+	@echo "compiling numba kernels (one time, ~45 s)"
 	$(BIN)/python -m engine.warmup
 	touch .install-stamp
+	@echo "installed: later runs start at once"
 
 install: .install-stamp
 

@@ -4,7 +4,19 @@ from __future__ import annotations
 
 
 class CCSMError(Exception):
-    """Base class of every error the engine raises on purpose."""
+    """Base class of every error the engine raises on purpose.
+
+    ``parameter`` is the engine's name of the input parameter the error is about (``"interval"``,
+    ``"elevation_field"``) or None: the message does not spell it, as each front end names it in its own
+    words (the CLI's ``--interval``, the upload's query parameter ``interval``).
+    """
+
+    parameter: str | None = None
+
+    def __init__(self, *args: object, parameter: str | None = None) -> None:
+        super().__init__(*args)
+        if parameter is not None:
+            self.parameter = parameter  # in the instance's __dict__, which pickling keeps (process pools)
 
 
 class InvalidContour(CCSMError, ValueError):

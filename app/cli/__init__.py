@@ -6,11 +6,14 @@ built), 1 on an internal error (one line on stderr names the log file with its t
 
 from __future__ import annotations
 
+import inspect
+
 import typer
 
 app = typer.Typer(
     name="ccsm",
-    help="Continuously generalized terrain contours (CCSM, Qian et al. 2021): simplify, evaluate, serve tiles.",
+    help="Continuously generalized terrain contours (CCSM, Qian et al. 2021): simplify, evaluate, build, export "
+    "and serve tiles.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -26,6 +29,11 @@ def _register_commands() -> None:
         commands_export,  # noqa: F401  export
         commands_service,  # noqa: F401  serve, build
     )
+
+    # ``ccsm --help`` lists each command with its docstring's whole first line: click would cut it to fit.
+    for command in app.registered_commands:
+        if command.short_help is None and command.callback is not None and command.callback.__doc__:
+            command.short_help = inspect.cleandoc(command.callback.__doc__).partition("\n")[0]
 
 
 def main() -> None:

@@ -22,7 +22,9 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from app.cli import app
-from app.cli.contour_issues import issues_phrase, report_contour_issues
+from app.cli.contour_issues import issues_phrase, report_contour_issues, report_skipped_features, write_report
+from app.cli.lazy_progress import LazyProgress
+from app.cli.messages import cli_message
 from engine.errors import CCSMError
 from engine.types import BadFeature
 
@@ -52,7 +54,7 @@ def bad_input_exits() -> Iterator[None]:
     try:
         yield
     except CCSMError as exc:
-        fail(str(exc))
+        fail(cli_message(exc))
 
 
 def check_scale(name: str, value: float) -> float:
@@ -123,6 +125,24 @@ ScheduleOption = Annotated[
 AttributionOption = Annotated[
     str | None, typer.Option("--attribution", help="Who made the data (TileJSON attribution).")
 ]
+ReportOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--report",
+        help="Write every skipped feature and every contour issue to FILE (.json or .csv); the terminal "
+        "summarises them.",
+        metavar="FILE",
+    ),
+]
+
+
+def check_report(report: Path | None) -> None:
+    """Exit 2 before any build when ``--report`` names a file of another format than JSON or CSV."""
+    from app.cli.run_report import report_problem
+
+    problem = report_problem(report)
+    if problem is not None:
+        fail(problem)
 
 
 def cartography_options(
@@ -198,6 +218,7 @@ def simplify(
     attribute_names: AttributeNamesOption = "ccsm",
     schedule: ScheduleOption = None,
     attribution: AttributionOption = None,
+    report: ReportOption = None,
 ) -> None:
     """Write every contour of SOURCE as it looks at one map scale.
 
@@ -216,6 +237,7 @@ def simplify(
     target_scale = check_scale("--target-scale", target_scale)
     if workers is not None and workers < 1:
         fail(f"--workers must be >= 1, got {workers}")
+    check_report(report)
     started = time.perf_counter()
     with bad_input_exits():
         check_method(method)
@@ -245,9 +267,9 @@ def simplify(
         write_json_atomically(out, doc)
     bad = [BadFeature(b["id"], b["reason"], b.get("where", "")) for b in info.bad_features]
     n_in = info.n_contours + len(bad)
-    if bad:
-        err_console.print(_bad_feature_table(bad))
-    issues = report_contour_issues(err_console, cache, info.id)
+    report_skipped_features(err_console, bad, report)
+    issues = report_contour_issues(err_console, cache, info.id, report)
+    write_report(report, cache, info.id, str(source), bad)
     console.print(
         f"{out}: {len(result.contours)} contours at 1:{scale:,.0f} ({method}, CRS {to_crs}); "
         f"{result.vanished} too small to show at this scale (left out); "
@@ -292,11 +314,8 @@ def build_into_cache(
         cache = _open_cache(store_path, is_default=store is None)
     except OSError as exc:
         fail(f"cannot open the store {store_path}: {exc.strerror or exc}")
-    with _progress() as progress:
-        task = progress.add_task("building surfaces", total=None)
-        info, _ = build_dataset(
-            cache, spec, workers=workers, progress=lambda d, t: progress.update(task, completed=d, total=t)
-        )
+    with LazyProgress(_progress, "building surfaces") as progress:  # drawn once the source is read
+        info, _ = build_dataset(cache, spec, workers=workers, progress=progress.update)
     return cache, info
 
 

@@ -29,6 +29,7 @@ from app.cli.commands_engine import (
     ElevationFieldOption,
     IndexEveryOption,
     IntervalOption,
+    ReportOption,
     ScheduleOption,
     SourceScaleOption,
     TargetScaleOption,
@@ -36,12 +37,14 @@ from app.cli.commands_engine import (
     bad_input_exits,
     build_into_cache,
     cartography_options,
+    check_report,
     check_scale,
     console,
     err_console,
     fail,
 )
-from app.cli.contour_issues import issues_phrase, report_contour_issues
+from app.cli.contour_issues import issues_phrase, report_contour_issues, report_skipped_features, write_report
+from app.cli.lazy_progress import LazyProgress
 
 
 def _progress() -> Progress:
@@ -122,6 +125,7 @@ def export(
     attribute_names: AttributeNamesOption = "ccsm",
     schedule: ScheduleOption = None,
     attribution: AttributionOption = None,
+    report: ReportOption = None,
 ) -> None:
     """Write the morph tiles of a source or stored dataset to a PMTiles or MBTiles archive (gzip MVT).
 
@@ -137,6 +141,7 @@ def export(
         fail(f"--workers must be >= 1, got {workers}")
     source_scale = check_scale("--source-scale", source_scale)
     target_scale = check_scale("--target-scale", target_scale)
+    check_report(report)
     with bad_input_exits():
         check_zoom_range(minzoom, maxzoom)
         check_writable(out)  # before any build: an unwritable or unknown target fails at once
@@ -162,8 +167,7 @@ def export(
             dataset_id = dataset if dataset is not None else str(source)
             store_path = store or _service_store()
             _stored_dataset(store_path, dataset_id, source if source is not None else f"--dataset {dataset_id}")
-        with _progress() as progress:
-            task = progress.add_task(f"tiles z{minzoom}-{maxzoom}", total=None)
+        with LazyProgress(_progress, f"tiles z{minzoom}-{maxzoom}") as progress:  # drawn once tiles are counted
             result = export_dataset(
                 store_path,
                 dataset_id,
@@ -171,11 +175,15 @@ def export(
                 minzoom=minzoom,
                 maxzoom=maxzoom,
                 workers=workers,
-                progress=lambda d, t: progress.update(task, completed=d, total=t),
+                progress=progress.update,
             )
     from engine.store.store import CCSStore
 
-    issues = report_contour_issues(err_console, CCSStore(store_path, readonly=True), dataset_id)
+    stored = CCSStore(store_path, readonly=True)
+    skipped = stored.dataset(dataset_id).bad_features
+    report_skipped_features(err_console, skipped, report)
+    issues = report_contour_issues(err_console, stored, dataset_id, report)
+    write_report(report, stored, dataset_id, source or dataset_id, skipped)
     console.print(
         f"{out}: {result.tiles} tiles ({result.format}, gzip MVT, z{minzoom}-{maxzoom}; {result.empty} empty left "
         f"out), {result.bytes / 1e6:.2f} MB; {issues_phrase(issues)}; tiles {result.seconds:.1f} s, "

@@ -30,7 +30,12 @@ ElevOpt = Annotated[
     str | None, typer.Option("--elevation-field", help="Elevation attribute of contour files.")
 ]
 IntervalOpt = Annotated[
-    float | None, typer.Option("--interval", min=0.0, help="Contour interval (required for a DEM).")
+    float | None,
+    typer.Option(
+        "--interval",
+        min=0.0,
+        help="Contour interval, in the source's vertical unit [contour files: from their levels; needed for a DEM].",
+    ),
 ]
 SourceScaleOpt = Annotated[
     float | None, typer.Option("--source-scale", help="Scale denominator of the source (t = 0) [50000].")
@@ -144,11 +149,21 @@ def build(
             "--block", min=2, help="GeoTIFF / .asc: trace in windows of this many cells a side [by size]."
         ),
     ] = None,
+    report: Annotated[
+        Path | None,
+        typer.Option(
+            "--report",
+            help="Write every skipped feature and every contour issue to FILE (.json or .csv); the terminal "
+            "summarises them.",
+            metavar="FILE",
+        ),
+    ] = None,
 ) -> None:
     """Precompute a source into the store without serving (one transaction: a killed build changes nothing)."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    from app.cli.lazy_progress import LazyProgress
     from app.service import SAMPLE_ID, SAMPLE_NAME, build_lock
     from app.settings import Settings
     from engine.build.datasets import SourceSpec, build_dataset, slugify
@@ -156,6 +171,11 @@ def build(
     from engine.store.store import CCSStore
 
     console = Console(stderr=True)
+    from app.cli.run_report import report_problem
+
+    if (problem := report_problem(report)) is not None:
+        console.print(f"[red]error:[/red] {problem}", highlight=False, soft_wrap=True)
+        raise typer.Exit(2)
     if scheduler is not None:
         console.print(f"building on the Dask cluster at {scheduler}")
     settings = Settings()
@@ -181,34 +201,34 @@ def build(
     console.print(f"building {spec.dataset} from {spec.path.name} into {store_path}")
     try:
         ccs_store = CCSStore(store_path)
+        bar = Progress(
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            console=console,
+            transient=False,
+        )
         with (
             build_lock(store_path),
-            Progress(
-                TextColumn("[bold]{task.description}"),
-                BarColumn(),
-                MofNCompleteColumn(),
-                TimeElapsedColumn(),
-                console=console,
-                transient=False,
-            ) as progress,
+            LazyProgress(lambda: bar, f"building {spec.dataset}") as progress,  # drawn once the source is read
         ):
-            task = progress.add_task(f"building {spec.dataset}", total=None)
-
-            def report(done: int, total: int) -> None:
-                progress.update(task, completed=done, total=total)
-
             with build_executor(scheduler, workers or settings.build_workers) as executor:
                 info, rebuilt = build_dataset(
-                    ccs_store, spec, workers=workers or settings.build_workers, progress=report, force=force,
+                    ccs_store, spec, workers=workers or settings.build_workers, progress=progress.update, force=force,
                     executor=executor,
                 )
     except CCSMError as exc:
-        console.print(f"[red]error:[/red] {exc}")
+        from app.cli.messages import cli_message
+
+        console.print(f"[red]error:[/red] {cli_message(exc)}", highlight=False, soft_wrap=True)
         raise typer.Exit(2) from None
     verb = "built" if rebuilt else "already current:"
-    from app.cli.contour_issues import issues_phrase, report_contour_issues
+    from app.cli.contour_issues import issues_phrase, report_contour_issues, report_skipped_features, write_report
 
-    issues = report_contour_issues(console, ccs_store, info.id)
+    report_skipped_features(console, info.bad_features, report)
+    issues = report_contour_issues(console, ccs_store, info.id, report)
+    write_report(report, ccs_store, info.id, str(spec.path), info.bad_features)
     console.print(
         f"{verb} {info.id} -> {store_path} ({info.n_contours} contours, {info.n_vertices} vertices, "
         f"data_version {info.data_version}, {len(info.bad_features)} bad features, {issues_phrase(issues)})"

@@ -124,6 +124,19 @@ def _kind(exc: Exception) -> str:
     return re.sub(r"(?<!^)(?=[A-Z])", "_", type(exc).__name__).lower()
 
 
+#: The engine's parameter names as the HTTP API takes them (the upload's query parameters), with what to give.
+HTTP_PARAMETERS: dict[str, str] = {
+    "interval": "give the query parameter interval (the contour interval, in the DEM's vertical unit)",
+    "elevation_field": "give the query parameter elevation_field",
+}
+
+
+def http_message(exc: Exception) -> str:
+    """An error's message, and which query parameter to give when it is about one (``CCSMError.parameter``)."""
+    hint = HTTP_PARAMETERS.get(getattr(exc, "parameter", None) or "")
+    return f"{exc}; {hint}" if hint else str(exc)
+
+
 async def ccsm_error_handler(request: Request, exc: Exception) -> JSONResponse:
     """Domain errors: the status from the table, the message (paths cut) as detail."""
     status = status_for(exc)
@@ -134,7 +147,7 @@ async def ccsm_error_handler(request: Request, exc: Exception) -> JSONResponse:
     else:
         log.info("%s %s -> %d %s", request.method, log_safe(request.url.path), status, log_safe(exc))
     headers = _HEADERS.get(status)
-    return JSONResponse(error_body(request, _kind(exc), public_message(str(exc))), status, headers=headers)
+    return JSONResponse(error_body(request, _kind(exc), public_message(http_message(exc))), status, headers=headers)
 
 
 async def validation_error_handler(request: Request, exc: Exception) -> JSONResponse:

@@ -22,6 +22,7 @@ from engine.io.cleaning import LineParts, assemble_batches, in_batches
 from engine.io.crs import WGS84, parse_crs
 from engine.io.dem_tracing import LevelLines, contour_levels, iter_levels
 from engine.io.dem_windows import contour_windows, window_side
+from engine.io.unreadable import unreadable_message
 from engine.scratch import ReadScratch
 from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
 from engine.types import BadFeature, ContourSet, FeatureId
@@ -112,7 +113,7 @@ def contours_from_dem(
         The file is missing, unreadable, of an unknown format, has no CRS, or yields no contour.
     """
     if not (isinstance(interval, (int, float)) and math.isfinite(interval) and interval > 0):
-        raise InvalidParameter(f"interval {interval!r} must be a positive number")
+        raise InvalidParameter(f"interval {interval!r} must be a positive number", parameter="interval")
     path = Path(path)
     windowed = _windowed_block(path, block)
     if windowed is not None:
@@ -172,7 +173,7 @@ def _read_raster(path: Path) -> DemGrid:
             t = src.transform
             geotransform = (t.a, t.b, t.c, t.d, t.e, t.f)
     except RasterioError as exc:
-        raise SourceError(f"{path}: cannot read DEM ({exc})") from exc
+        raise SourceError(unreadable_message(path, "a DEM", exc)) from exc
     z = np.ma.masked_invalid(z)
     return DemGrid(z=z, transform=geotransform, crs=crs)
 
@@ -373,7 +374,7 @@ def dem_vertical_units(path: str | os.PathLike[str]) -> str | None:
             band_unit = (src.units or (None,))[0]
             wkt = src.crs.to_wkt() if src.crs is not None else None
     except RasterioError as exc:
-        raise SourceError(f"{path}: cannot read DEM ({exc})") from exc
+        raise SourceError(unreadable_message(path, "a DEM", exc)) from exc
     if band_unit and band_unit.strip().lower() in UNIT_NAMES:
         return UNIT_NAMES[band_unit.strip().lower()]
     if wkt:

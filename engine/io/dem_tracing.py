@@ -33,7 +33,8 @@ def contour_levels(zmin: float, zmax: float, interval: float) -> NDArray[np.floa
     last = math.floor(zmax / interval)
     if last - first + 1 > MAX_LEVELS:
         raise InvalidParameter(
-            f"interval {interval} gives {last - first + 1} levels over [{zmin}, {zmax}] (more than {MAX_LEVELS})"
+            f"interval {interval} gives {last - first + 1} levels over [{zmin}, {zmax}] (more than {MAX_LEVELS})",
+            parameter="interval",
         )
     # Rounding keeps 0.1 · 3 at 0.3, so elevations and ids read as the user typed the interval.
     return np.round(np.arange(first, last + 1, dtype=np.float64) * interval, 9)

@@ -31,6 +31,7 @@ from scipy.spatial import cKDTree
 
 from engine.errors import InvalidParameter, SourceError
 from engine.io.dem_tracing import LevelLines, contour_levels, iter_levels
+from engine.io.unreadable import unreadable_message
 from engine.parallel import map_ordered
 from engine.scratch import ReadScratch
 
@@ -79,7 +80,7 @@ def read_header(path: Path) -> RasterHeader:
                 tile_shape=tuple(src.block_shapes[0]) if tiled else None,  # type: ignore[arg-type]
             )
     except RasterioError as exc:
-        raise SourceError(f"{path}: cannot read DEM ({exc})") from exc
+        raise SourceError(unreadable_message(path, "a DEM", exc)) from exc
 
 
 def window_side(path: Path, block: int | None) -> int | None:

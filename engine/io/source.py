@@ -105,7 +105,7 @@ def read_source(
         if not path.exists():
             raise SourceError(f"{path}: file not found")
         if interval is None:
-            raise InvalidParameter(f"{path}: a DEM needs a contour interval (interval=...)")
+            raise InvalidParameter(f"{path}: a DEM needs a contour interval", parameter="interval")
         return contours_from_dem(
             path, interval=interval, tolerances=tolerances, block=block, executor=executor, scratch=scratch
         )

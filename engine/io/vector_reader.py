@@ -24,7 +24,7 @@ import numpy as np
 import shapely
 from nanoarrow.iterator import UnregisteredExtensionWarning
 from numpy.typing import NDArray
-from pyogrio import list_layers
+from pyogrio import list_layers, read_info
 from pyogrio.errors import DataLayerError, DataSourceError
 from pyogrio.raw import open_arrow
 
@@ -32,6 +32,7 @@ from engine.errors import SourceError
 from engine.io import cleaning
 from engine.io.cleaning import LineParts, assemble_batches, in_batches
 from engine.io.crs import WGS84, parse_crs
+from engine.io.unreadable import unreadable_message
 from engine.scratch import ReadScratch
 from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
 from engine.types import BadFeature, ContourSet, FeatureId
@@ -128,12 +129,17 @@ def read_contours(
         source_crs = parse_crs(crs_text, where=str(path))
 
         field_names = [str(name) for name in meta["fields"]]
-        elev_name = field_names[find_elevation_field(field_names, elevation_field, path)]
+        try:
+            elev_name = field_names[find_elevation_field(field_names, elevation_field, path)]
+        except SourceError:
+            if _feature_count(path, layer) == 0:  # an empty file has no fields either: say so, not which ones
+                raise SourceError(f"{path}: the file has no features") from None
+            raise
         id_name = next((name for name in field_names if name.lower() == "id"), None)
         reads = _feature_reads(stream, meta, path, layer, id_name, elev_name)
         first = next(reads, None)
         if first is None:
-            raise SourceError(f"{path}: no features")
+            raise SourceError(f"{path}: the file has no features")
         batches = _line_parts(chain([first], reads), path, elev_name)
         del first  # the batches let go of each read once its lines are made
         return assemble_batches(
@@ -246,7 +252,14 @@ def _as_source_error(path: Path, layer: str | None) -> Iterator[None]:
     except DataLayerError as exc:
         raise SourceError(f"{path}: cannot open layer {layer!r} ({exc})") from exc
     except (DataSourceError, RuntimeError, IndexError) as exc:  # nanoarrow's errors are RuntimeErrors
-        raise SourceError(f"{path}: cannot read contours ({exc})") from exc
+        raise SourceError(unreadable_message(path, "contour lines", exc)) from exc
+
+
+def _feature_count(path: Path, layer: str) -> int | None:
+    """How many features the layer holds, None when GDAL cannot tell without reading them all."""
+    with _as_source_error(path, layer):
+        count = int(read_info(path, layer=layer)["features"])
+    return None if count < 0 else count
 
 
 def find_elevation_field(field_names: Sequence[str], requested: str | None, path: Path) -> int:
@@ -258,14 +271,16 @@ def find_elevation_field(field_names: Sequence[str], requested: str | None, path
         if requested.lower() in lower:
             return lower.index(requested.lower())
         raise SourceError(
-            f"{path}: elevation field {requested!r} not found; available fields: {', '.join(field_names) or 'none'}"
+            f"{path}: elevation field {requested!r} not found; available fields: {', '.join(field_names) or 'none'}",
+            parameter="elevation_field",
         )
     for candidate in ELEVATION_FIELDS:
         if candidate in lower:
             return lower.index(candidate)
     raise SourceError(
         f"{path}: no elevation field found (looked for {', '.join(ELEVATION_FIELDS)}); "
-        f"available fields: {', '.join(field_names) or 'none'}; pass elevation_field"
+        f"available fields: {', '.join(field_names) or 'none'}",
+        parameter="elevation_field",
     )
 
 

@@ -9,6 +9,7 @@ from pyogrio import list_layers, read_info
 from pyogrio.errors import DataLayerError, DataSourceError
 
 from engine.errors import SourceError
+from engine.io.unreadable import unreadable_message
 from engine.io.vector_reader import find_elevation_field
 
 #: Words in an elevation attribute's name that give its unit ("ELEV_FT", "contour_feet", "height_m").
@@ -47,6 +48,8 @@ def elevation_units(path: str | os.PathLike[str], elevation_field: str | None = 
     try:
         meta = read_info(path, layer=str(list_layers(path)[0][0]))
     except (DataLayerError, DataSourceError, RuntimeError, IndexError) as exc:
-        raise SourceError(f"{path}: cannot read contours ({exc})") from exc
+        raise SourceError(unreadable_message(path, "contour lines", exc)) from exc
+    if meta["features"] == 0:  # an empty file has no fields either: say so, not which fields it lacks
+        raise SourceError(f"{path}: the file has no features")
     names = [str(n) for n in meta["fields"]]
     return units_from_field_name(names[find_elevation_field(names, elevation_field, path)])

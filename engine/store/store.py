@@ -44,7 +44,7 @@ from engine.store.codec import (
     stored_labels,
     vanish_value,
 )
-from engine.store.issues import delete_issues, insert_issues, read_issues
+from engine.store.issues import REPORTED_ISSUES, delete_issues, insert_issues, read_issues
 from engine.store.records import (
     ContourHead,
     ContourRecord,
@@ -288,10 +288,10 @@ class CCSStore(BuildBook):
         row = self._con().execute(f"SELECT {LABEL_COLUMNS} FROM labels WHERE dataset=?", (dataset,)).fetchone()
         return None if row is None else stored_labels(row)
 
-    def contour_issues(self, dataset: str) -> tuple[list[dict[str, Any]], int]:
+    def contour_issues(self, dataset: str, limit: int = REPORTED_ISSUES) -> tuple[list[dict[str, Any]], int]:
         """The dataset's contours served without part of their build (``fid``, ``id``, ``step``, ``reason``;
-        the first :data:`engine.store.issues.REPORTED_ISSUES`) and how many there are."""
-        return read_issues(self._con(), dataset)
+        the first ``limit``) and how many there are."""
+        return read_issues(self._con(), dataset, limit)
 
     def delete(self, dataset: str) -> bool:
         """Remove a dataset and its build status; True if it was stored."""

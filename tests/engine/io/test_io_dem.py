@@ -264,5 +264,5 @@ def test_missing_and_unreadable_dem(tmp_path: Path) -> None:
         read_source(tmp_path / "missing.tif", interval=10)
     bad = tmp_path / "garbage.tif"
     bad.write_bytes(b"not a tiff")
-    with pytest.raises(SourceError, match="garbage.tif: cannot read DEM"):
+    with pytest.raises(SourceError, match="garbage.tif: the file could not be read as a DEM"):
         read_source(bad, interval=10)

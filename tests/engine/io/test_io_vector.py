@@ -411,7 +411,7 @@ def test_missing_file(tmp_path: Path) -> None:
 def test_unreadable_file(tmp_path: Path) -> None:
     path = tmp_path / "broken.geojson"
     path.write_text("{not json")
-    with pytest.raises(SourceError, match="broken.geojson: cannot read contours"):
+    with pytest.raises(SourceError, match="broken.geojson: the file could not be read as contour lines"):
         read_source(path)
 
 
