@@ -188,7 +188,7 @@ class DatasetService:
     def start_builds(self) -> None:
         """Queue a build of every configured source that is missing or changed."""
         for spec in self.specs:
-            if self._is_current(spec) or not spec.path.exists():
+            if self._is_current(spec) or (isinstance(spec.path, Path) and not spec.path.exists()):
                 continue
             self.store.set_build_status(spec.dataset, "building", 0, 0)
             job = BuildJob(

@@ -50,7 +50,8 @@ def write_pyramid(
     that grid as ``folder/mercator.tif`` and its tiles as RGBA PNG (alpha 0 where the DEM has no data).
     ``on_step``: the GeoTIFF's heights rounded to the encoding's step first, so the tiles hold them exactly."""
     rows, cols = z.shape
-    west, south, east, north = transform_bounds(crs, "EPSG:4326", *rasterio.transform.array_bounds(rows, cols, transform))
+    bounds = rasterio.transform.array_bounds(rows, cols, transform)
+    west, south, east, north = transform_bounds(crs, "EPSG:4326", *bounds)
     tx0, ty0 = _tile_of(west, north, zoom)
     tx1, ty1 = _tile_of(east, south, zoom)
     res = 2 * HALF / (TILE * 2**zoom)

@@ -133,7 +133,8 @@ class RasterDem:
         try:
             with self._env(), rasterio.open(self._gdal_path()) as src:
                 area = self._area(src)
-                shifted = Window(area.col_off + window.col_off, area.row_off + window.row_off, window.width, window.height)
+                col, row = area.col_off + window.col_off, area.row_off + window.row_off
+                shifted = Window(col, row, window.width, window.height)
                 return np.ma.masked_invalid(src.read(1, window=shifted, masked=True).astype(np.float64))
         except RasterioError as exc:
             raise SourceError(f"{self.location}: cannot read window {window} ({exc})") from exc

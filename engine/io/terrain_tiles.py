@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import io
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -325,7 +326,10 @@ def open_mosaic(source: TerrainTiles) -> TileMosaic:
         raise InvalidParameter(f"DEM zoom {zoom} must be in 0..{MAX_ZOOM}")
     first = _area_tiles(bbox, zoom, ASSUMED_TILE_PX)[0]
     reader = open_tile_reader(source.location)
-    data = fetch_tiles(reader, [first], cache=source.cache)[first]
+    try:
+        data = fetch_tiles(reader, [first], cache=source.cache)[first]
+    except SourceError as exc:
+        raise SourceError(f"{exc} (the first tile of bbox {bbox} at zoom {zoom}: does the pyramid cover it?)") from exc
     tile_px = decode_tile(data, source.encoding, None, describe_tile(reader, first)).shape[0]
     if tile_px != ASSUMED_TILE_PX and source.zoom is None:
         zoom = max(0, zoom - round(math.log2(tile_px / ASSUMED_TILE_PX)))  # the same ground resolution
@@ -381,3 +385,18 @@ def _web_mercator_wkt() -> str:
     from engine.io.crs import parse_crs
 
     return str(parse_crs(WEB_MERCATOR).to_wkt())
+
+
+def prefetch(source: TerrainTiles, *, progress: Callable[[int, int], None] | None = None) -> TileMosaic:
+    """Fetch every tile of the source's area into its cache (concurrently, with retries), so that a build
+    reads them from there; the mosaic they form.
+
+    Raises
+    ------
+    SourceError, InvalidParameter
+        As :func:`open_mosaic`, and the first tile that cannot be had.
+    """
+    mosaic = open_mosaic(source)
+    fetch_tiles(open_tile_reader(source.location), mosaic_tiles(mosaic), cache=source.cache, progress=progress)
+    source.cache.trim()
+    return mosaic

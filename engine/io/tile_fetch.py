@@ -14,8 +14,8 @@ import sqlite3
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple, Protocol
@@ -373,25 +373,28 @@ def fetch_tiles(
             cache.put(reader, ref, data)
         return ref, data
 
-    if len(wanted) <= 1 or threads <= 1:
-        for ref in wanted:
-            found[ref] = one(ref)[1]
-            done += 1
-            if progress is not None:
-                progress(done, total)
-        return found
-    with ThreadPoolExecutor(max_workers=min(threads, len(wanted))) as pool:
-        pending = {pool.submit(one, ref) for ref in wanted}
-        while pending:
-            finished, pending = wait(pending, return_when=FIRST_EXCEPTION)
-            for future in finished:
-                if future.exception() is not None:
-                    for other in pending:
-                        other.cancel()
-                    raise future.exception()  # type: ignore[misc]
-                ref, data = future.result()
-                found[ref] = data
-                done += 1
-            if progress is not None:
-                progress(done, total)
+    for ref, data in _concurrently(one, wanted, threads):
+        found[ref] = data
+        done += 1
+        if progress is not None:
+            progress(done, total)
     return found
+
+
+def _concurrently(
+    task: Callable[[TileRef], tuple[TileRef, bytes]], refs: list[TileRef], threads: int
+) -> Iterator[tuple[TileRef, bytes]]:
+    """``task`` of every tile on ``threads`` threads, results as they finish; the first error stops the rest."""
+    if len(refs) <= 1 or threads <= 1:
+        yield from (task(ref) for ref in refs)
+        return
+    with ThreadPoolExecutor(max_workers=min(threads, len(refs))) as pool:
+        pending = {pool.submit(task, ref) for ref in refs}
+        try:
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    yield future.result()  # raises the tile's error
+        finally:
+            for future in pending:
+                future.cancel()
