@@ -38,14 +38,17 @@ def test_nothing_stored_is_touched_when_a_tile_fails(tmp_path: Path) -> None:
         before = CCSStore(store, readonly=True).dataset("mw")
         store_bytes = store.read_bytes()
         shutil.rmtree(pyramid.root / "16" / str(pyramid.tiles[-1][1]))
+        fresh_cache = {"XDG_CACHE_HOME": str(tmp_path / "fresh")}  # the first build's tiles are not in it
         for args in (["--interval", "5"], ["--interval", "5", "--id", "other"]):
             bad = runner.invoke(app, ["build", src, "--bbox", bbox, "--dem-zoom", "16", "--store", str(store),
-                                      "--workers", "1", "--id", "mw", *args], env={"XDG_CACHE_HOME": str(tmp_path / "fresh")})
+                                      "--workers", "1", "--id", "mw", *args], env=fresh_cache)
             assert bad.exit_code == 2, bad.output
             assert "HTTP 404" in bad.output and f"16/{pyramid.tiles[-1][1]}/" in bad.output
     after = CCSStore(store, readonly=True)
     assert after.dataset_ids() == ["mw"]
     now = after.dataset("mw")
-    assert (now.source_hash, now.data_version, now.n_contours) == (before.source_hash, before.data_version, before.n_contours)
+    assert (now.source_hash, now.data_version, now.n_contours) == (
+        before.source_hash, before.data_version, before.n_contours
+    )
     after.close()
     assert store.read_bytes() == store_bytes

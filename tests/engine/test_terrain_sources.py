@@ -179,7 +179,8 @@ def test_a_missing_tile_a_tile_that_is_no_image_and_a_refused_connection_name_th
             contours_from_dem(tiles_of(pyramid, server.url, MAPBOX), interval=10.0)
     refused = TerrainTiles(MAPBOX, "http://127.0.0.1:9/{z}/{x}/{y}.png", pyramid.bbox, 16)
     first = pyramid.tiles[0]
-    with pytest.raises(SourceError, match=rf"tile {first[0]}/{first[1]}/{first[2]} \(http://127.0.0.1:9/.*cannot fetch"):
+    named = rf"tile {first[0]}/{first[1]}/{first[2]} \(http://127.0.0.1:9/.*cannot fetch"
+    with pytest.raises(SourceError, match=named):
         contours_from_dem(refused, interval=10.0)
     with pytest.raises(SourceError, match="http://127.0.0.1:9/dem.tif: cannot read DEM"):
         contours_from_dem(RasterDem("http://127.0.0.1:9/dem.tif"), interval=10.0)
@@ -218,3 +219,11 @@ def test_decoding_an_encoded_height_is_within_half_a_step(heights: list[float], 
     h = np.asarray(heights).reshape(1, -1)
     back = encoding.decode(encoding.encode(h))
     assert np.all(np.abs(back - h) <= encoding.scale / 2 + 1e-9)
+
+
+def test_the_decoders_follow_the_published_formulas() -> None:
+    # Mapbox terrain-RGB: -10000 + (R*65536 + G*256 + B) * 0.1; Terrarium: R*256 + G + B/256 - 32768.
+    rgb = np.array([[[1, 134, 160], [1, 134, 170], [128, 0, 0], [128, 100, 128], [0, 0, 0]]], dtype=np.uint8)
+    assert MAPBOX.decode(rgb)[0, :2].round(9).tolist() == [0.0, 1.0]
+    assert TERRARIUM.decode(rgb)[0, 2:].tolist() == [0.0, 100.5, -32768.0]
+    assert MAPBOX.decode(rgb)[0, 4] == -10000.0
