@@ -196,7 +196,7 @@ class DatasetService:
         for spec in self.specs:
             if self._is_current(spec):
                 self._log_contour_issues(spec.dataset)
-            if self._is_current(spec) or not spec.path.exists():
+            if self._is_current(spec) or (isinstance(spec.path, Path) and not spec.path.exists()):
                 continue
             self.store.set_build_status(spec.dataset, "building", 0, 0)
             job = BuildJob(

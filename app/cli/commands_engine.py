@@ -25,12 +25,14 @@ from app.cli import app
 from app.cli.contour_issues import issues_phrase, report_contour_issues, report_skipped_features, write_report
 from app.cli.lazy_progress import LazyProgress
 from app.cli.messages import cli_message
+from app.cli.terrain_options import SOURCE_HELP, BboxOption, DemZoomOption, open_source
 from engine.errors import CCSMError
 from engine.types import BadFeature
 
 if TYPE_CHECKING:
     from engine.cartography.options import CartographyOptions
     from engine.evaluation.topology import ScaleTopology
+    from engine.io.source import Source
     from engine.store.records import DatasetInfo
     from engine.store.store import CCSStore
     from engine.types import ContourSet
@@ -181,10 +183,7 @@ def default_cache_store() -> Path:
 
 @app.command()
 def simplify(
-    source: Annotated[
-        Path,
-        typer.Argument(help="Contour file (GeoJSON, GeoPackage, Shapefile) or DEM (GeoTIFF, .asc, .npz)."),
-    ],
+    source: Annotated[str, typer.Argument(help=SOURCE_HELP)],
     scale: Annotated[
         float, typer.Option("--scale", help="Map scale denominator of the output (250000 for 1:250,000).")
     ] = 250_000.0,
@@ -200,6 +199,8 @@ def simplify(
     target_scale: TargetScaleOption = 500_000.0,
     elevation_field: ElevationFieldOption = None,
     interval: IntervalOption = None,
+    bbox: BboxOption = None,
+    dem_zoom: DemZoomOption = None,
     crs: Annotated[str, typer.Option("--crs", help="Output CRS: 4326 (GeoJSON default), 3857 or source.")] = "4326",
     workers: Annotated[int | None, typer.Option("--workers", help="Worker processes (default: one per core).")] = None,
     store: Annotated[
@@ -242,10 +243,11 @@ def simplify(
     with bad_input_exits():
         check_method(method)
         cartography = cartography_options(units, index_every, attribute_names, schedule, attribution)
-        if not source.exists():
+        opened = open_source(source, bbox, dem_zoom, source_scale)
+        if isinstance(opened, Path) and not opened.exists():
             fail(f"{source}: file not found")
         cache, info = build_into_cache(
-            source,
+            opened,
             store,
             elevation_field=elevation_field,
             interval=interval,
@@ -281,7 +283,7 @@ def simplify(
 
 
 def build_into_cache(
-    source: Path,
+    source: Source,
     store: Path | None,
     *,
     elevation_field: str | None,
@@ -299,7 +301,7 @@ def build_into_cache(
     from engine.build.datasets import SourceSpec, build_dataset, source_hash
 
     spec = SourceSpec(
-        path=source.resolve(),
+        path=source.resolve() if isinstance(source, Path) else source,
         dataset="",
         name=source.stem,
         elevation_field=elevation_field,

@@ -45,6 +45,7 @@ from app.cli.commands_engine import (
 )
 from app.cli.contour_issues import issues_phrase, report_contour_issues, report_skipped_features, write_report
 from app.cli.lazy_progress import LazyProgress
+from app.cli.terrain_options import BboxOption, DemZoomOption, names_a_source, open_source
 
 
 def _progress() -> Progress:
@@ -120,6 +121,8 @@ def export(
     target_scale: TargetScaleOption = 500_000.0,
     elevation_field: ElevationFieldOption = None,
     interval: IntervalOption = None,
+    bbox: BboxOption = None,
+    dem_zoom: DemZoomOption = None,
     units: UnitsOption = None,
     index_every: IndexEveryOption = 5,
     attribute_names: AttributeNamesOption = "ccsm",
@@ -150,9 +153,9 @@ def export(
             fail("give either SOURCE or --dataset, not both")
         if source is None and dataset is None:
             fail("give a contour file or DEM, or --store PATH --dataset ID")
-        if source is not None and Path(source).is_file():
+        if source is not None and names_a_source(source):
             cache, info = build_into_cache(
-                Path(source),
+                open_source(source, bbox, dem_zoom, source_scale),
                 store,
                 elevation_field=elevation_field,
                 interval=interval,

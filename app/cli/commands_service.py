@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from app.cli import app
+from app.cli.terrain_options import SOURCE_HELP, BboxOption, DemZoomOption, open_source
 
 if TYPE_CHECKING:
     from engine.store.store import CCSStore as CCSStoreType
@@ -112,9 +113,7 @@ def _check_store_or_exit(store_path: Path) -> None:
 
 @app.command()
 def build(
-    source: Annotated[
-        Path | None, typer.Argument(help="Contour file or DEM; none = the bundled sample.")
-    ] = None,
+    source: Annotated[str | None, typer.Argument(help=SOURCE_HELP + " None = the bundled sample.")] = None,
     store: StoreOpt = None,
     dataset: Annotated[
         str | None, typer.Option("--id", help="Dataset id [from the file name; 'sample'].")
@@ -122,6 +121,8 @@ def build(
     name: Annotated[str | None, typer.Option(help="Human name of the dataset.")] = None,
     elevation_field: ElevOpt = None,
     interval: IntervalOpt = None,
+    bbox: BboxOption = None,
+    dem_zoom: DemZoomOption = None,
     source_scale: SourceScaleOpt = None,
     target_scale: TargetScaleOpt = None,
     workers: Annotated[int | None, typer.Option(help="Build processes [one per core].", min=1)] = None,
@@ -185,13 +186,18 @@ def build(
 
         spec = SourceSpec(sample_contours_path(), dataset or SAMPLE_ID, name or SAMPLE_NAME)
     else:
-        if not source.exists():
+        try:
+            opened = open_source(source, bbox, dem_zoom, source_scale or settings.source_scale)
+        except CCSMError as exc:
+            console.print(f"[red]error:[/red] {exc}")
+            raise typer.Exit(2) from None
+        if isinstance(opened, Path) and not opened.exists():
             console.print(f"[red]error:[/red] source not found: {source}")
             raise typer.Exit(2)
         spec = SourceSpec(
-            source.resolve(),
-            dataset or slugify(source.stem),
-            name or source.stem,
+            opened.resolve() if isinstance(opened, Path) else opened,
+            dataset or slugify(opened.stem),
+            name or opened.stem,
             elevation_field=elevation_field if elevation_field is not None else settings.elevation_field,
             interval=interval if interval is not None else settings.interval,
             source_scale=source_scale or settings.source_scale,

@@ -27,7 +27,7 @@ from engine.ccsm.build import BuiltSet, SpooledSet, build_into
 from engine.ccsm.ccs import CCS
 from engine.ccsm.spool import surface_of
 from engine.io.dem import DEM_SUFFIXES
-from engine.io.source import read_source
+from engine.io.source import Source, read_source, source_file
 from engine.parallel import map_ordered
 from engine.params import BuildParams
 from engine.scratch import DiskSpool, ReadScratch
@@ -40,12 +40,19 @@ Progress = Callable[[int, int], None]
 
 
 def source_hash(
-    path: str | os.PathLike[str] | None, params: dict[str, Any], data: bytes | None = None
+    path: str | os.PathLike[str] | Source | None, params: dict[str, Any], data: bytes | None = None
 ) -> str:
-    """SHA-256 of a source's bytes (a file's content or ``data``), its build parameters and the store format."""
+    """SHA-256 of a source's bytes (a file's content or ``data``), its build parameters and the store format.
+
+    A URL or a tile pyramid is hashed by what it is (its location, area and zoom), not by its bytes: they are
+    taken as unchanging (``--force`` rebuilds).
+    """
     h = hashlib.sha256()
     h.update(f"ccsm-store-{STORE_FORMAT}\n".encode())
     h.update(json.dumps(params, sort_keys=True, default=str).encode())
+    if path is not None and not isinstance(path, (str, os.PathLike)):
+        h.update(path.identity().encode())
+        path = source_file(path)
     if data is not None:
         h.update(data)
     elif path is not None:
@@ -66,7 +73,8 @@ class SourceSpec:
     Attributes
     ----------
     path
-        Contour file or DEM (anything :func:`engine.io.source.read_source` reads).
+        Contour file or DEM (anything :func:`engine.io.source.read_source` reads): a path, or a raster URL
+        or tile pyramid as :func:`engine.io.source.parse_source` gives them.
     dataset
         Dataset id in the store (``[a-z0-9_-]``).
     name
@@ -86,7 +94,7 @@ class SourceSpec:
         content hash, since it changes no contour.
     """
 
-    path: Path
+    path: Source
     dataset: str
     name: str
     elevation_field: str | None = None
@@ -101,6 +109,8 @@ class SourceSpec:
         """The DEM to shade under this source's contours, or None."""
         if self.relief_dem is not None:
             return self.relief_dem
+        if not isinstance(self.path, Path):
+            return None  # a remote or windowed DEM: no relief is shaded from it
         return self.path if self.path.suffix.lower() in DEM_SUFFIXES else None
 
     def params(self) -> dict[str, Any]:
@@ -122,7 +132,8 @@ class SourceSpec:
         else as the source states it, else metres), and the path of the DEM to shade (``relief_dem``), if any."""
         options = (self.cartography or CartographyOptions()).checked()
         if options.units is None:
-            units = source_units(self.path, self.elevation_field) or "m"
+            local = self.path if isinstance(self.path, Path) else source_file(self.path)
+            units = (source_units(local, self.elevation_field) if local is not None else None) or "m"
             options = replace(options, units=units)
         stored = {**self.params(), PARAMS_KEY: options.as_params()}
         relief = self.relief_path()

@@ -21,7 +21,9 @@ from engine.intervals import UNIT_NAMES
 from engine.io.cleaning import LineParts, assemble_batches, in_batches
 from engine.io.crs import WGS84, parse_crs
 from engine.io.dem_tracing import LevelLines, contour_levels, iter_levels
-from engine.io.dem_windows import contour_windows, window_side
+from engine.io.dem_windows import DEFAULT_BLOCK, WINDOWED_ABOVE_CELLS, WindowSource, contour_windows, window_side
+from engine.io.raster_windows import RasterDem
+from engine.io.terrain_tiles import TerrainTiles, open_mosaic
 from engine.io.unreadable import unreadable_message
 from engine.scratch import ReadScratch
 from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
@@ -67,7 +69,7 @@ class DemGrid:
 
 
 def contours_from_dem(
-    path: str | os.PathLike[str],
+    path: str | os.PathLike[str] | RasterDem | TerrainTiles,
     *,
     interval: float,
     tolerances: Tolerances = DEFAULT_TOLERANCES,
@@ -81,7 +83,9 @@ def contours_from_dem(
     ----------
     path
         ``.tif`` / ``.tiff`` (GeoTIFF), ``.asc`` (ESRI ASCII grid with its ``.prj``), or ``.npz`` in the
-        layout of matplotlib's sample DEM (keys elevation, xmin, xmax, ymin, ymax, dx, dy; EPSG:4326).
+        layout of matplotlib's sample DEM (keys elevation, xmin, xmax, ymin, ymax, dx, dy; EPSG:4326); or a
+        :class:`~engine.io.raster_windows.RasterDem` (a GeoTIFF URL, or a raster's area) or
+        :class:`~engine.io.terrain_tiles.TerrainTiles` (a tile pyramid's area), always read in windows.
     interval
         Contour interval in the DEM's vertical unit; levels are the multiples of it within the data's range.
     tolerances
@@ -114,6 +118,16 @@ def contours_from_dem(
     """
     if not (isinstance(interval, (int, float)) and math.isfinite(interval) and interval > 0):
         raise InvalidParameter(f"interval {interval!r} must be a positive number", parameter="interval")
+    if isinstance(path, (RasterDem, TerrainTiles)):
+        return _contours_in_windows(
+            open_mosaic(path) if isinstance(path, TerrainTiles) else path,
+            float(interval),
+            stem=path.stem,
+            tolerances=tolerances,
+            block=block,
+            executor=executor,
+            scratch=scratch,
+        )
     path = Path(path)
     windowed = _windowed_block(path, block)
     if windowed is not None:
@@ -132,6 +146,37 @@ def contours_from_dem(
         name=path.stem,
         tolerances=tolerances,
         interval=float(interval),
+        scratch=scratch,
+    )
+
+
+def _contours_in_windows(
+    source: WindowSource,
+    interval: float,
+    *,
+    stem: str,
+    tolerances: Tolerances,
+    block: int | None,
+    executor: Executor | None,
+    scratch: ReadScratch | None,
+) -> ContourSet:
+    """:func:`contours_from_dem` of a source read only in windows (one window for a small grid)."""
+    if block is None:
+        header = source.header()
+        large = header.rows * header.cols > WINDOWED_ABOVE_CELLS
+        block = DEFAULT_BLOCK if large else max(header.rows, header.cols)
+    levels, header = contour_windows(source, interval, block=block, executor=executor, scratch=scratch)
+    crs = parse_crs(header.crs_wkt, where=source.name)
+    batches = (
+        batch for lv in levels for batch in in_batches(line_parts_from_traced([lv], header.transform, source.name))
+    )
+    return assemble_batches(
+        batches,
+        source_crs=crs,
+        where=source.name,
+        name=stem,
+        tolerances=tolerances,
+        interval=interval,
         scratch=scratch,
     )
 

@@ -21,6 +21,7 @@ from collections.abc import Iterator
 from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 import rasterio
@@ -55,6 +56,25 @@ class RasterHeader:
     transform: tuple[float, float, float, float, float, float]
     crs_wkt: str
     tile_shape: tuple[int, int] | None  # internal tiles (rows, cols) of a tiled GeoTIFF, else None
+
+
+class WindowSource(Protocol):
+    """A DEM read window by window: a raster file (:class:`~engine.io.raster_windows.RasterDem`) or a tile
+    pyramid's mosaic (:class:`~engine.io.terrain_tiles.TileMosaic`). Plain data, so that a worker process can
+    read its own windows."""
+
+    @property
+    def name(self) -> str:
+        """What to call the source in messages."""
+        ...
+
+    def header(self) -> RasterHeader:
+        """Size, geotransform, CRS and internal tiling of the grid."""
+        ...
+
+    def read(self, window: Window) -> np.ma.MaskedArray:
+        """The heights of one window of the grid (float64, masked where there is no data)."""
+        ...
 
 
 def read_header(path: Path) -> RasterHeader:
@@ -119,13 +139,18 @@ def windows(header: RasterHeader, block: int) -> Iterator[Window]:
             yield Window(c0, r0, c1 - c0 + 1, r1 - r0 + 1)
 
 
-def trace_window(path: str, window: Window, interval: float) -> tuple[list[LevelLines], float, float]:
+def trace_window(
+    source: str | WindowSource, window: Window, interval: float
+) -> tuple[list[LevelLines], float, float]:
     """The lines of one window in whole-grid index space, and the window's height range (nan, nan if empty).
 
     A module-level function of plain arguments, so a worker process or a Dask worker can run it.
     """
-    with rasterio.open(path) as src:
-        z = np.ma.masked_invalid(src.read(1, window=window, masked=True).astype(np.float64))
+    if isinstance(source, str):
+        with rasterio.open(source) as src:
+            z = np.ma.masked_invalid(src.read(1, window=window, masked=True).astype(np.float64))
+    else:
+        z = np.ma.masked_invalid(source.read(window))
     if z.count() == 0:
         return [], float("nan"), float("nan")
     zmin, zmax = float(z.min()), float(z.max())
@@ -173,7 +198,7 @@ def join_pieces(pieces: list[NDArray[np.float64]]) -> list[NDArray[np.float64]]:
 
 
 def contour_windows(
-    path: Path,
+    path: Path | WindowSource,
     interval: float,
     *,
     block: int = DEFAULT_BLOCK,
@@ -181,6 +206,8 @@ def contour_windows(
     scratch: ReadScratch | None = None,
 ) -> tuple[Iterator[LevelLines], RasterHeader]:
     """Trace a raster DEM window by window (see the module's docstring); its lines joined level by level.
+
+    ``path`` is a raster file, or any :class:`WindowSource` (a remote or cropped raster, a tile mosaic).
 
     Every window is traced before this returns (so an unusable DEM fails here); the levels are joined as the
     returned iterator is read, in increasing order. With ``scratch``, the traced pieces wait there rather
@@ -201,10 +228,11 @@ def contour_windows(
     """
     if block < 1:
         raise InvalidParameter(f"block {block} must be at least 1 cell")
-    header = read_header(path)
+    header = read_header(path) if isinstance(path, Path) else path.header()
+    source: str | WindowSource = str(path) if isinstance(path, Path) else path
     if header.rows < 2 or header.cols < 2:
         raise SourceError(f"{path.name}: a DEM needs at least 2 x 2 cells, got {header.rows} x {header.cols}")
-    tasks = ((str(path), w, interval) for w in windows(header, block))
+    tasks = ((source, w, interval) for w in windows(header, block))
     pieces = _LevelPieces(scratch)
     zmin, zmax = np.inf, -np.inf
     for traced, lo, hi in map_ordered(executor, trace_window, tasks):

@@ -3,6 +3,10 @@
 ``read_source`` dispatches on the file's extension: contour lines (GeoJSON, GeoPackage, Shapefile) are read
 as they are, a DEM (GeoTIFF, ESRI ASCII grid, ``.npz``) is contoured at ``interval``. Either way the result
 is a :class:`~engine.types.ContourSet` in metres of a projected working CRS.
+
+``parse_source`` turns what a user writes into a source: a path, a GeoTIFF URL (read by HTTP range requests,
+:mod:`engine.io.raster_windows`) or a terrain tile pyramid written ``ENCODING:LOCATION``
+(:mod:`engine.io.terrain_tiles`), with an area and a zoom.
 """
 
 from __future__ import annotations
@@ -13,9 +17,12 @@ from pathlib import Path
 
 from engine.errors import InvalidParameter, SourceError
 from engine.io.crs import choose_working_crs, make_transformer
-from engine.io.dem import DEM_SUFFIXES, contours_from_dem
+from engine.io.dem import DEM_SUFFIXES, RASTER_SUFFIXES, contours_from_dem
 from engine.io.geojson_writer import write_geojson
+from engine.io.raster_windows import REMOTE_SUFFIXES, RasterDem, is_url
 from engine.io.sample import sample_contours_path, sample_dem_path
+from engine.io.terrain_tiles import ENCODING_SYNTAX, TerrainTiles, check_bbox, looks_like_encoding, parse_encoding
+from engine.io.tile_fetch import TileCache
 from engine.io.vector_reader import VECTOR_SUFFIXES, read_contours
 from engine.scratch import ReadScratch
 from engine.tolerances import DEFAULT_TOLERANCES, Tolerances
@@ -23,6 +30,8 @@ from engine.types import ContourSet
 
 __all__ = [
     "SUPPORTED_SUFFIXES",
+    "Source",
+    "parse_source",
     "choose_working_crs",
     "contours_from_dem",
     "make_transformer",
@@ -36,9 +45,88 @@ __all__ = [
 #: Every file extension :func:`read_source` understands.
 SUPPORTED_SUFFIXES: tuple[str, ...] = VECTOR_SUFFIXES + DEM_SUFFIXES
 
+#: A source as :func:`parse_source` gives it: a local file, a raster read in windows (a URL or an area of a
+#: file), or a terrain tile pyramid's area.
+Source = Path | RasterDem | TerrainTiles
+
+
+def parse_source(
+    text: str | os.PathLike[str],
+    *,
+    bbox: tuple[float, float, float, float] | None = None,
+    dem_zoom: int | None = None,
+    source_scale: float = 50_000.0,
+    tile_cache: TileCache | None = None,
+) -> Source:
+    """The source a user wrote.
+
+    Parameters
+    ----------
+    text
+        A path; a GeoTIFF URL (``https://host/dem.tif``); or a terrain tile pyramid ``ENCODING:LOCATION``,
+        ENCODING ``terrarium``, ``mapbox`` or ``custom:BASE:SCALE``, LOCATION a ``{z}/{x}/{y}`` URL or folder
+        template or a ``.pmtiles`` / ``.mbtiles`` file (:mod:`engine.io.terrain_tiles`).
+    bbox
+        (west, south, east, north) in degrees: required for a tile pyramid; for a raster (a file or a URL),
+        read only the pixels it touches.
+    dem_zoom
+        Tile pyramids only: the zoom to read; None = the zoom whose pixel matches ``source_scale``
+        (:func:`engine.io.terrain_tiles.default_zoom`).
+    tile_cache
+        Where a pyramid's fetched tiles are kept (None: in memory only).
+
+    Raises
+    ------
+    SourceError
+        An unknown encoding, a URL that is neither a GeoTIFF nor a tile source.
+    InvalidParameter
+        A pyramid without an area, a bad area, an area or a zoom for a source that takes none.
+    """
+    raw = os.fspath(text)
+    encoded = parse_encoding(raw)
+    if encoded is not None and not Path(raw).exists():
+        encoding, location = encoded
+        return TerrainTiles(
+            encoding,
+            location,
+            check_bbox(bbox, raw),
+            dem_zoom,
+            source_scale=source_scale,
+            cache=tile_cache if tile_cache is not None else TileCache(),
+        )
+    if dem_zoom is not None:
+        raise InvalidParameter(f"{raw}: --dem-zoom applies to terrain tile sources (ENCODING:LOCATION) only")
+    unknown = looks_like_encoding(raw)
+    if unknown is not None and not Path(raw).exists():
+        raise SourceError(f"{raw}: unknown terrain tile encoding {unknown!r}; expected {ENCODING_SYNTAX}")
+    if is_url(raw):
+        if not raw.lower().split("?")[0].endswith(REMOTE_SUFFIXES):
+            raise SourceError(
+                f"{raw}: a URL source is a GeoTIFF ({', '.join(REMOTE_SUFFIXES)}) or a tile pyramid written "
+                f"ENCODING:URL ({ENCODING_SYNTAX})"
+            )
+        return RasterDem(raw, None if bbox is None else check_bbox(bbox, raw))
+    path = Path(raw).expanduser()
+    if bbox is None:
+        return path
+    if path.suffix.lower() not in RASTER_SUFFIXES:
+        raise InvalidParameter(f"{raw}: --bbox applies to rasters ({', '.join(RASTER_SUFFIXES)}) and tile sources")
+    if not path.exists():
+        raise SourceError(f"{path}: file not found")
+    return RasterDem(str(path.resolve()), check_bbox(bbox, raw))
+
+
+def source_file(source: Source) -> Path | None:
+    """The local file whose bytes a source is, or None (a URL or a tile pyramid)."""
+    if isinstance(source, Path):
+        return source
+    if isinstance(source, RasterDem) and not is_url(source.location):
+        return Path(source.location)
+    return None
+
 
 def read_source(
-    path: str | os.PathLike[str],
+    path: str | os.PathLike[str] | RasterDem | TerrainTiles,
     *,
     elevation_field: str | None = None,
     layer: str | None = None,
@@ -55,6 +143,8 @@ def read_source(
     path
         ``.geojson`` / ``.json`` / ``.gpkg`` / ``.shp``: contour lines with an elevation attribute.
         ``.tif`` / ``.tiff`` / ``.asc`` / ``.npz``: a DEM, contoured at every multiple of ``interval``.
+        A :class:`~engine.io.raster_windows.RasterDem` or :class:`~engine.io.terrain_tiles.TerrainTiles`
+        (see :func:`parse_source`): a DEM read window by window.
     elevation_field
         Contour files only: the elevation attribute (found by name when None, see
         :func:`engine.io.vector_reader.read_contours`).
@@ -92,6 +182,12 @@ def read_source(
     >>> cs.working_crs, len(cs.contours)
     ('EPSG:32616', 1830)
     """
+    if isinstance(path, (RasterDem, TerrainTiles)):
+        if interval is None:
+            raise InvalidParameter(f"{path.name}: a DEM needs a contour interval (interval=...)")
+        return contours_from_dem(
+            path, interval=interval, tolerances=tolerances, block=block, executor=executor, scratch=scratch
+        )
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix in VECTOR_SUFFIXES:
