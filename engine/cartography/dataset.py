@@ -12,7 +12,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from engine.cartography.labels import LabelSource, first_label_zoom
 from engine.cartography.options import CartographyOptions
-from engine.cartography.schedule import NEVER, ZOOM_DECIMALS, Schedule, make_schedule
+from engine.cartography.schedule import ZOOM_DECIMALS, Schedule, make_schedule
 from engine.store.records import ContourRecord, DatasetInfo, LabelAnchors
 from engine.tiles.grid import mercator_to_lonlat
 from engine.tiles.scale import zoom_for_scale
@@ -54,20 +54,19 @@ class DatasetCartography:
         return np.asarray(np.abs(np.asarray(elevations, dtype=np.float64)) < 1e-9, dtype=bool)
 
     def shown_in_tile(self, elevations: ArrayLike, z: int) -> NDArray[np.bool_]:
-        """Which contours a tile of zoom ``z`` carries: those not fully faded somewhere in [z, z + 1); the 0 m
-        line never with ``sea="drop"`` and always (it never fades) with ``sea="coastline"``."""
+        """Which contours a tile of zoom ``z`` carries: those not fully faded somewhere in [z, z + 1), the 0 m
+        line not with ``sea="drop"``."""
         _, hide = self.schedule.zooms_of(self.schedule.rank_of(elevations))
         shown = np.asarray(hide < z + 1, dtype=bool)
         if self.options.sea == "drop":
             return shown & ~self.is_sea_level(elevations)
-        if self.options.sea == "coastline":
-            return shown | self.is_sea_level(elevations)
         return shown
 
     def line_columns(self, elevations: NDArray[np.float64]) -> dict[str, list[Any]]:
         """The cartography attributes of contour features: elevation (named per the options), index, level,
         rank, fade_zoom and hide_zoom, in that order (``t`` is the renderer's), then ``coastline`` (true on the
-        0 m line, which never fades) with ``sea="coastline"``."""
+        0 m line) with ``sea="coastline"``; 0 is a multiple of every step, so the 0 m line is of the top rank and
+        never fades."""
         ranks = self.schedule.rank_of(elevations)
         levels = self.schedule.level_of(elevations)
         fade, hide = self.schedule.zooms_of(ranks)
@@ -80,10 +79,7 @@ class DatasetCartography:
             "hide_zoom": hide.tolist(),
         }
         if self.options.sea == "coastline":
-            coast = self.is_sea_level(elevations)
-            columns["fade_zoom"] = np.where(coast, NEVER, fade).tolist()
-            columns["hide_zoom"] = np.where(coast, NEVER, hide).tolist()
-            columns["coastline"] = coast.tolist()
+            columns["coastline"] = self.is_sea_level(elevations).tolist()
         return columns
 
     def label_text(self, elevation: float) -> str:

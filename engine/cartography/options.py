@@ -52,7 +52,7 @@ class CartographyOptions:
         Who made the data, for TileJSON (None: the source file's name).
     sea
         One of SEA_CHOICES: the 0 m line left out of tiles and labels ("drop"), drawn as a coastline (its
-        features carry ``coastline: true`` and never fade), or kept as an ordinary contour.
+        features carry ``coastline: true``), or kept as an ordinary contour.
     depth_labels
         One of DEPTH_LABELS: negative levels labelled "-200 m" or "200 m".
     label_orientation

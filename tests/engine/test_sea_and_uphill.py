@@ -174,7 +174,7 @@ def test_the_zero_line_is_a_coastline_or_left_out(coast, dropped) -> None:
         features = tile_features(coast[1], "coast", z)
         zero = [f for f in features if f["properties"]["elevation"] == 0]
         assert zero and all(f["properties"]["coastline"] is True for f in zero)
-        assert all(f["properties"]["hide_zoom"] == -1 for f in zero)  # the coastline never fades
+        assert all(f["properties"]["hide_zoom"] == -1 for f in zero)  # of the top rank: it never fades
         assert not any(f["properties"]["coastline"] for f in features if f["properties"]["elevation"] != 0)
         others = tile_features(dropped[1], "drop", z)
         assert others and not [f for f in others if f["properties"]["elevation"] == 0]
@@ -280,3 +280,22 @@ def test_the_text_top_faces_uphill_on_random_cones_and_slopes(kind, cx, cy, gx, 
             assert hi > lo, (kind, angle, hi, lo)
             checked += 1
     assert checked > 0 or kind == "slope"
+
+
+# -- the options ------------------------------------------------------------------------------------------
+
+
+def test_the_options_are_checked_stored_and_leave_older_hashes_alone() -> None:
+    from engine.cartography.schedule import check_units
+    from engine.errors import InvalidParameter
+
+    given = CartographyOptions("fathoms", 5, "ccsm", None, None, "Coastline", "below-datum", "upright").checked()
+    assert (given.units, given.sea, given.label_orientation) == ("fm", "coastline", "upright")
+    assert CartographyOptions.from_params({"cartography": given.as_params()}) == given
+    assert set(CartographyOptions(units="m").as_params()) == {
+        "units", "index_every", "attribute_names", "schedule", "attribution"
+    }
+    assert check_units("fm") == "fm"
+    for bad in ({"sea": "ocean"}, {"depth_labels": "up"}, {"label_orientation": "sideways"}):
+        with pytest.raises(InvalidParameter, match=next(iter(bad))):
+            CartographyOptions(**bad).checked()
