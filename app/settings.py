@@ -56,7 +56,7 @@ class Settings(BaseSettings):
     )
 
     # -- cartography of the sources (docs/design.md section 9) -------------------------------------------
-    units: Literal["m", "ft"] | None = Field(
+    units: Literal["m", "ft", "fm"] | None = Field(
         None, description="Vertical unit of the sources; unset = as the source states it, else m."
     )
     index_every: int = Field(5, ge=2, le=100, description="Index contours are every n-th interval.")
@@ -65,6 +65,15 @@ class Settings(BaseSettings):
     )
     schedule: str | None = Field(
         None, description="Interval schedule override STEP:HIDE_SCALE,...,STEP; unset = the default rule."
+    )
+    sea: Literal["drop", "coastline", "keep"] = Field(
+        "drop", description="The 0 m line: dropped, drawn as a coastline (coastline: true), or an ordinary contour."
+    )
+    depth_labels: Literal["negative", "below-datum"] = Field(
+        "negative", description="Negative levels labelled -200 m (negative) or 200 m (below-datum)."
+    )
+    label_orientation: Literal["uphill", "upright"] = Field(
+        "uphill", description="Label text top toward higher ground (uphill) or always upright."
     )
     attribution: str | None = Field(
         None, description="Attribution of the sources in TileJSON; unset = the source file's name."
@@ -204,7 +213,14 @@ class Settings(BaseSettings):
         """The sources' cartography options; None when every one is at its default (the hash of a source
         built before these options existed stays the same)."""
         options = CartographyOptions(
-            self.units, self.index_every, self.attribute_names, self.schedule, self.attribution
+            self.units,
+            self.index_every,
+            self.attribute_names,
+            self.schedule,
+            self.attribution,
+            self.sea,
+            self.depth_labels,
+            self.label_orientation,
         )
         return None if options == CartographyOptions() else options
 

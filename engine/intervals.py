@@ -103,7 +103,8 @@ def is_index(elevation: float, interval: float | None) -> bool:
     return abs(q - round(q)) < 1e-6
 
 
-#: Spellings of the two vertical units, in user options and in rasters' metadata, by the unit they name.
+#: Spellings of the vertical units (metres, feet and fathoms of 1.8288 m, the charts' unit of depth), in user
+#: options and in rasters' metadata, by the unit they name.
 UNIT_NAMES = {
     "m": "m",
     "metre": "m",
@@ -117,4 +118,7 @@ UNIT_NAMES = {
     "foot_us": "ft",
     "us-ft": "ft",
     "ftus": "ft",
+    "fm": "fm",
+    "fathom": "fm",
+    "fathoms": "fm",
 }

@@ -114,7 +114,8 @@ IntervalOption = Annotated[
 
 #: Cartography options of a source (docs/design.md section 9), shared by simplify and export.
 UnitsOption = Annotated[
-    str | None, typer.Option("--units", help="Vertical unit m or ft (default: as the source states it, else m).")
+    str | None,
+    typer.Option("--units", help="Vertical unit m, ft or fm (fathoms; default: as the source states it, else m)."),
 ]
 IndexEveryOption = Annotated[int, typer.Option("--index-every", help="Index contours are every n-th interval.")]
 AttributeNamesOption = Annotated[
@@ -147,14 +148,35 @@ def check_report(report: Path | None) -> None:
         fail(problem)
 
 
+SeaOption = Annotated[
+    str, typer.Option("--sea", help="The 0 m line: drop it, draw it as a coastline, or keep it as a contour.")
+]
+DepthLabelsOption = Annotated[
+    str, typer.Option("--depth-labels", help="Negative levels labelled negative (-200 m) or below-datum (200 m).")
+]
+LabelOrientationOption = Annotated[
+    str,
+    typer.Option("--label-orientation", help="Label text top toward higher ground (uphill) or always upright."),
+]
+
+
 def cartography_options(
-    units: str | None, index_every: int, attribute_names: str, schedule: str | None, attribution: str | None
+    units: str | None,
+    index_every: int,
+    attribute_names: str,
+    schedule: str | None,
+    attribution: str | None,
+    sea: str = "drop",
+    depth_labels: str = "negative",
+    label_orientation: str = "uphill",
 ) -> CartographyOptions | None:
     """The cartography options given on the command line, checked (InvalidParameter names a bad one); None
     when all are at their defaults, so a source built without them is found in the cache again."""
     from engine.cartography.options import CartographyOptions
 
-    options = CartographyOptions(units, index_every, attribute_names, schedule, attribution)
+    options = CartographyOptions(
+        units, index_every, attribute_names, schedule, attribution, sea, depth_labels, label_orientation
+    )
     return None if options == CartographyOptions() else options.checked()
 
 
@@ -220,6 +242,9 @@ def simplify(
     schedule: ScheduleOption = None,
     attribution: AttributionOption = None,
     report: ReportOption = None,
+    sea: SeaOption = "drop",
+    depth_labels: DepthLabelsOption = "negative",
+    label_orientation: LabelOrientationOption = "uphill",
 ) -> None:
     """Write every contour of SOURCE as it looks at one map scale.
 
@@ -242,7 +267,9 @@ def simplify(
     started = time.perf_counter()
     with bad_input_exits():
         check_method(method)
-        cartography = cartography_options(units, index_every, attribute_names, schedule, attribution)
+        cartography = cartography_options(
+            units, index_every, attribute_names, schedule, attribution, sea, depth_labels, label_orientation
+        )
         opened = open_source(source, bbox, dem_zoom, source_scale)
         if isinstance(opened, Path) and not opened.exists():
             fail(f"{source}: file not found")

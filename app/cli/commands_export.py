@@ -26,11 +26,14 @@ from app.cli import app
 from app.cli.commands_engine import (
     AttributeNamesOption,
     AttributionOption,
+    DepthLabelsOption,
     ElevationFieldOption,
     IndexEveryOption,
     IntervalOption,
+    LabelOrientationOption,
     ReportOption,
     ScheduleOption,
+    SeaOption,
     SourceScaleOption,
     TargetScaleOption,
     UnitsOption,
@@ -129,6 +132,9 @@ def export(
     schedule: ScheduleOption = None,
     attribution: AttributionOption = None,
     report: ReportOption = None,
+    sea: SeaOption = "drop",
+    depth_labels: DepthLabelsOption = "negative",
+    label_orientation: LabelOrientationOption = "uphill",
 ) -> None:
     """Write the morph tiles of a source or stored dataset to a PMTiles or MBTiles archive (gzip MVT).
 
@@ -148,7 +154,9 @@ def export(
     with bad_input_exits():
         check_zoom_range(minzoom, maxzoom)
         check_writable(out)  # before any build: an unwritable or unknown target fails at once
-        cartography = cartography_options(units, index_every, attribute_names, schedule, attribution)
+        cartography = cartography_options(
+            units, index_every, attribute_names, schedule, attribution, sea, depth_labels, label_orientation
+        )
         if source is not None and dataset is not None:
             fail("give either SOURCE or --dataset, not both")
         if source is None and dataset is None:

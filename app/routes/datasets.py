@@ -94,7 +94,7 @@ async def upload_dataset(
         float | None, Query(description="Scale denominator of t = 1.", gt=0, le=1e10, allow_inf_nan=False)
     ] = None,
     units: Annotated[
-        Literal["m", "ft"] | None,
+        Literal["m", "ft", "fm"] | None,
         Query(description="Vertical unit (default: as the elevation property's name states it, else m)."),
     ] = None,
     index_every: Annotated[int, Query(description="Index contours are every n-th interval.", ge=2, le=100)] = 5,
@@ -109,6 +109,16 @@ async def upload_dataset(
     attribution: Annotated[
         str | None, Query(description="Who made the data, for TileJSON.", max_length=500)
     ] = None,
+    sea: Annotated[
+        Literal["drop", "coastline", "keep"],
+        Query(description="The 0 m line: dropped, drawn as a coastline, or an ordinary contour."),
+    ] = "drop",
+    depth_labels: Annotated[
+        Literal["negative", "below-datum"], Query(description="Negative levels labelled -200 m or 200 m.")
+    ] = "negative",
+    label_orientation: Annotated[
+        Literal["uphill", "upright"], Query(description="Label text top toward higher ground, or upright.")
+    ] = "uphill",
 ) -> JSONResponse:
     """Upload GeoJSON contours (the document itself is the body); answered 202 while the dataset builds in
     a build process of its own."""
@@ -117,7 +127,9 @@ async def upload_dataset(
         interval=interval,
         source_scale=source_scale or settings.source_scale,
         target_scale=target_scale or settings.target_scale,
-        cartography=CartographyOptions(units, index_every, attribute_names, schedule, attribution),
+        cartography=CartographyOptions(
+            units, index_every, attribute_names, schedule, attribution, sea, depth_labels, label_orientation
+        ),
     )
     params.check()  # bad scales or options are refused before the body is read
     # The body goes to a file as it arrives, and is parsed in a process of its own: never on the event loop

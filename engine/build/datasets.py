@@ -21,12 +21,13 @@ from typing import Any
 
 from engine.build.labels import label_placer
 from engine.build.records import contour_rows, dataset_meta
+from engine.cartography.dataset import UPHILL_SIDE_KEY
 from engine.cartography.options import PARAMS_KEY, CartographyOptions, check_schedule_fits
 from engine.cartography.units import source_units
 from engine.ccsm.build import BuiltSet, SpooledSet, build_into
 from engine.ccsm.ccs import CCS
 from engine.ccsm.spool import surface_of
-from engine.io.dem import DEM_SUFFIXES
+from engine.io.dem import DEM_SUFFIXES, dem_uphill_side
 from engine.io.source import Source, read_source, source_file
 from engine.parallel import map_ordered
 from engine.params import BuildParams
@@ -129,13 +130,18 @@ class SourceSpec:
 
     def stored_params(self) -> dict[str, Any]:
         """The parameters as stored with the dataset: :meth:`params` with the vertical unit resolved (given,
-        else as the source states it, else metres), and the path of the DEM to shade (``relief_dem``), if any."""
+        else as the source states it, else metres), the side of higher ground of a DEM's traced lines
+        (``uphill_side``), and the path of the DEM to shade (``relief_dem``), if any."""
         options = (self.cartography or CartographyOptions()).checked()
         if options.units is None:
             local = self.path if isinstance(self.path, Path) else source_file(self.path)
             units = (source_units(local, self.elevation_field) if local is not None else None) or "m"
             options = replace(options, units=units)
         stored = {**self.params(), PARAMS_KEY: options.as_params()}
+        # Traced lines all keep higher ground on one side (a local DEM file; tile and remote sources are
+        # labelled upright for now).
+        if isinstance(self.path, Path) and self.path.suffix.lower() in DEM_SUFFIXES:
+            stored[UPHILL_SIDE_KEY] = dem_uphill_side(self.path)
         relief = self.relief_path()
         if relief is not None:
             stored[RELIEF_DEM_KEY] = str(relief.resolve())

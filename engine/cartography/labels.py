@@ -33,6 +33,9 @@ log = logging.getLogger("ccsm.labels")
 
 #: EPSG:3857 metres per pixel at zoom 0 (512 px tiles).
 MERCATOR_M_PER_PX_Z0 = 2 * math.pi * EARTH_RADIUS_M / TILE_SIZE_PX
+#: A label whose top faces uphill is turned this far from upright at most (degrees): past it, where the text
+#: would read nearly upside down (a line running west with higher ground to the south), it is turned upright.
+UPSIDE_DOWN_LIMIT_DEG = 120.0
 
 
 @dataclass(frozen=True)
@@ -64,6 +67,7 @@ class LabelSource:
     top: NDArray[np.float64]
     t_at_scale: NDArray[np.float64]
     first_zoom: float
+    uphill: int = 0  # higher ground on the left of the line's direction (1), on its right (-1), unknown (0)
 
 
 def metres_per_px(zoom: float | NDArray[np.float64]) -> NDArray[np.float64]:
@@ -74,12 +78,36 @@ def metres_per_px(zoom: float | NDArray[np.float64]) -> NDArray[np.float64]:
 def upright_angle(dx: NDArray[np.float64], dy: NDArray[np.float64]) -> NDArray[np.float64]:
     """``text-rotate`` degrees of a direction (dx east, dy north): clockwise, kept within [-90, 90].
 
-    >>> upright_angle(np.array([1.0, 0.0, -1.0, 1.0]), np.array([0.0, 1.0, 0.0, 1.0])).tolist()
-    [-0.0, -90.0, -0.0, -45.0]
+    >>> (upright_angle(np.array([1.0, 0.0, -1.0, 1.0]), np.array([0.0, 1.0, 0.0, 1.0])) + 0.0).tolist()
+    [0.0, -90.0, 0.0, -45.0]
     """
     a = -np.degrees(np.arctan2(dy, dx))  # screen y points down: a line rising to the east turns anticlockwise
     a = np.where(a > 90, a - 180, a)
     return np.where(a < -90, a + 180, a)
+
+
+def orient_angle(
+    dx: NDArray[np.float64], dy: NDArray[np.float64], uphill: int, limit_deg: float = UPSIDE_DOWN_LIMIT_DEG
+) -> NDArray[np.float64]:
+    """``text-rotate`` degrees of a label along a direction (dx east, dy north) of a contour with higher ground
+    on its left (``uphill`` 1) or right (-1): the text's top toward higher ground, unless that turns it more
+    than ``limit_deg`` from upright, where it is turned upright; ``uphill`` 0 (unknown): :func:`upright_angle`.
+
+    Text rotated by a (clockwise) reads along (cos a, -sin a) with its top toward (sin a, cos a), the left of
+    its reading direction: so it reads along the line where higher ground is on the left, against it where
+    higher ground is on the right.
+
+    Higher ground on the right of lines running north, south-west and east: the first reads southward, top
+    east; the second reads north-east, top north-west; the third would be upside down and is turned upright.
+
+    >>> (orient_angle(np.array([0.0, -1.0, 1.0]), np.array([1.0, -1.0, 0.0]), -1) + 0.0).tolist()
+    [90.0, -45.0, 0.0]
+    """
+    if uphill == 0:
+        return upright_angle(dx, dy)
+    a = -np.degrees(np.arctan2(dy, dx)) + (0.0 if uphill > 0 else 180.0)
+    a = (a + 180.0) % 360.0 - 180.0  # within [-180, 180)
+    return np.where(np.abs(a) > limit_deg, upright_angle(dx, dy), a)
 
 
 def _t_through_zooms(
@@ -154,7 +182,7 @@ def contour_candidates(
     half = label_px * metres_per_px(first[pick]) / 2
     ends = [np.clip(s[rows] + sign * half, 0.0, s[-1]) for sign in (-1.0, 1.0)]
     dx, dy = (np.interp(ends[1], s, base[:, i]) - np.interp(ends[0], s, base[:, i]) for i in (0, 1))
-    return base[rows], upright_angle(dx, dy), score[pick], first[pick]
+    return base[rows], orient_angle(dx, dy, src.uphill), score[pick], first[pick]
 
 
 def box_px(text_len: NDArray[np.int64], angle_deg: NDArray[np.float64], style: LabelStyle) -> NDArray[np.float64]:

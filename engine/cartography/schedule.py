@@ -32,7 +32,7 @@ NEVER = -1.0
 #: Decimals of the zooms written to tiles and TileJSON (1e-4 of a zoom level is far below a frame).
 ZOOM_DECIMALS = 4
 #: Units a dataset's elevations may be in.
-UNITS = ("m", "ft")
+UNITS = ("m", "ft", "fm")
 #: Relative tolerance of "is a multiple of" (elevations are rounded to ELEVATION_DECIMALS anyway).
 MULTIPLE_RTOL = 1e-6
 
@@ -114,7 +114,7 @@ class Schedule:
 
 
 def check_units(units: object) -> str:
-    """``units`` if it is "m" or "ft" (case and spelling variants accepted), else raise naming it."""
+    """``units`` if it is "m", "ft" or "fm" (case and spelling variants accepted), else raise naming it."""
     if isinstance(units, str) and units.strip().lower() in UNIT_NAMES:
         return UNIT_NAMES[units.strip().lower()]
     raise InvalidParameter(f"units must be one of {', '.join(UNITS)}, got {units!r}")

@@ -220,8 +220,28 @@ def contour_line_layer(fade: RankFade, base: RankFade | None = None) -> dict[str
     }
 
 
+#: The coastline's ink: the blue of water on printed maps, a little heavier than an index contour.
+COASTLINE_COLOR = "#3b7fb6"
+COASTLINE_WIDTH_PX = 1.6
+
+
+def coastline_layer() -> dict[str, Any]:
+    """The coastline: the 0 m line of a dataset built with ``sea="coastline"`` (features with ``coastline``
+    true, which never fade), drawn over the contours; it matches nothing in other datasets."""
+    return {
+        "id": "coastline",
+        "type": "line",
+        "source": CONTOUR_SOURCE,
+        "source-layer": "contours",
+        "filter": ["==", ["get", "coastline"], True],
+        "layout": {"line-join": "round", "line-cap": "round"},
+        "paint": {"line-color": COASTLINE_COLOR, "line-width": COASTLINE_WIDTH_PX},
+    }
+
+
 def contour_label_layer(fade: RankFade) -> dict[str, Any]:
-    """The label layer of one rank: the elevation with its unit, along the line, upright, with a halo."""
+    """The label layer of one rank: the elevation with its unit, along the line at the tiles' ``angle`` (its top
+    toward higher ground, or upright), with a halo."""
     return {
         "id": f"contour-labels-rank-{fade.rank}",
         "type": "symbol",
@@ -266,7 +286,7 @@ def build_style(src: StyleSource) -> dict[str, Any]:
     """A complete MapLibre style v8 of a dataset.
 
     Layers, bottom to top: paper, hillshade (when the dataset has a DEM), contour lines rank by rank from the
-    base interval up (coarser ranks draw over finer ones), then labels rank by rank.
+    base interval up (coarser ranks draw over finer ones), the coastline, then labels rank by rank.
 
     Parameters
     ----------
@@ -308,6 +328,7 @@ def build_style(src: StyleSource) -> dict[str, Any]:
             }
         )
     layers += [contour_line_layer(f, schedule[0]) for f in schedule]
+    layers.append(coastline_layer())
     layers += [contour_label_layer(f) for f in schedule]
     return {
         "version": 8,

@@ -20,7 +20,7 @@ from engine.errors import InvalidParameter, SourceError
 from engine.intervals import UNIT_NAMES
 from engine.io.cleaning import LineParts, assemble_batches, in_batches
 from engine.io.crs import WGS84, parse_crs
-from engine.io.dem_tracing import LevelLines, contour_levels, iter_levels
+from engine.io.dem_tracing import LevelLines, contour_levels, iter_levels, uphill_side
 from engine.io.dem_windows import DEFAULT_BLOCK, WINDOWED_ABOVE_CELLS, WindowSource, contour_windows, window_side
 from engine.io.raster_windows import RasterDem
 from engine.io.terrain_tiles import TerrainTiles, open_mosaic
@@ -428,3 +428,23 @@ def dem_vertical_units(path: str | os.PathLike[str]) -> str | None:
         if vertical and vertical[0].axis_info:
             return UNIT_NAMES.get(vertical[0].axis_info[0].unit_name.strip().lower())
     return None
+
+
+def dem_uphill_side(path: str | os.PathLike[str]) -> str:
+    """The side ("left" or "right") every contour traced from the DEM at ``path`` has higher ground on
+    (:func:`~engine.io.dem_tracing.uphill_side` of its geotransform).
+
+    Raises
+    ------
+    SourceError
+        The DEM cannot be read.
+    """
+    path = Path(path)
+    if path.suffix.lower() in NPZ_SUFFIXES:
+        return uphill_side(read_dem(path).transform)
+    try:
+        with rasterio.open(path) as src:
+            t = src.transform
+    except RasterioError as exc:
+        raise SourceError(f"{path}: cannot read DEM ({exc})") from exc
+    return uphill_side((t.a, t.b, t.c, t.d, t.e, t.f))

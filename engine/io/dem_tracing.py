@@ -40,6 +40,22 @@ def contour_levels(zmin: float, zmax: float, interval: float) -> NDArray[np.floa
     return np.round(np.arange(first, last + 1, dtype=np.float64) * interval, 9)
 
 
+def uphill_side(transform: tuple[float, float, float, float, float, float]) -> str:
+    """The side of its direction ("left" or "right") every line traced from a grid with this geotransform has
+    higher ground on, in the grid's CRS (x east, y north).
+
+    contourpy turns every line so that higher values lie on its left in grid index space (column, row); the
+    geotransform keeps that side where it keeps the turning sense (its determinant is positive) and mirrors
+    it otherwise, as a north-up grid (rows running south) does. Joins across windows and the cleaning keep
+    every line's direction (docs/design.md section 4.4), so the side holds for the stored contours.
+
+    >>> uphill_side((30.0, 0.0, 0.0, 0.0, -30.0, 0.0)), uphill_side((30.0, 0.0, 0.0, 0.0, 30.0, 0.0))
+    ('right', 'left')
+    """
+    a, b, _, d, e, _ = transform
+    return "left" if a * e - b * d > 0 else "right"
+
+
 #: Lines of one level in grid index space: (level, [(n, 2) points of each line]).
 LevelLines = tuple[float, list[NDArray[np.float64]]]
 

@@ -22,14 +22,17 @@ UNIT_WORDS: dict[str, str] = {
     "meters": "m",
     "metre": "m",
     "metres": "m",
+    "fm": "fm",
+    "fathom": "fm",
+    "fathoms": "fm",
 }
 
 
 def units_from_field_name(name: str) -> str | None:
-    """The vertical unit an elevation attribute's name states ("ft" or "m"), or None.
+    """The vertical unit an elevation attribute's name states ("ft", "m" or "fm"), or None.
 
-    >>> units_from_field_name("ELEV_FT"), units_from_field_name("contour feet"), units_from_field_name("ele")
-    ('ft', 'ft', None)
+    >>> units_from_field_name("ELEV_FT"), units_from_field_name("depth fathoms"), units_from_field_name("ele")
+    ('ft', 'fm', None)
     """
     words = [w for w in "".join(c if c.isalnum() else " " for c in name.lower()).split() if w]
     found = {UNIT_WORDS[w] for w in words[1:] if w in UNIT_WORDS}  # the first word is the quantity

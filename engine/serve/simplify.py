@@ -83,10 +83,18 @@ def simplify(
         xs, ys = lonlat_to_mercator(np.array([bbox.minx, bbox.maxx]), np.array([bbox.miny, bbox.maxy]))
         fids = renderer.store.query(dataset, (xs[0], ys[0], xs[1], ys[1]))
     recs = renderer.records(fids)
-    schedule = renderer.cartography(dataset).schedule
+    carto = renderer.cartography(dataset)
+    schedule = carto.schedule
     ranks = schedule.rank_of([r.elevation for r in recs]).tolist()
     faded = [schedule.ranks[k].hide_scale is not None and value >= schedule.ranks[k].hide_scale for k in ranks]
-    kept = [(r, k) for r, k, f in zip(recs, ranks, faded, strict=True) if all_levels or not f]
+    # The 0 m line, as tiles draw it: left out with sea "drop" (even with all_levels), never faded as a coastline.
+    at_sea = carto.is_sea_level([r.elevation for r in recs]) & (carto.options.sea != "keep")
+    drop_sea = carto.options.sea == "drop"
+    kept = [
+        (r, k)
+        for r, k, f, sea in zip(recs, ranks, faded, at_sea.tolist(), strict=True)
+        if (not drop_sea if sea else all_levels or not f)
+    ]
     shown = [(r, k) for r, k in kept if how.is_visible(r, value)]
     dropped = len(recs) - len(kept)
     if not shown:

@@ -164,7 +164,8 @@ class LabelAnchors:
     xy
         (n, 2) EPSG:3857 anchor points.
     angle
-        (n,) degrees for MapLibre's ``text-rotate``: clockwise, 0 = text runs west to east, in [-90, 90].
+        (n,) degrees for MapLibre's ``text-rotate``: clockwise, 0 = text runs west to east; in [-90, 90] when
+        upright, else the text's top toward higher ground (docs/design.md section 9.3).
     min_zoom
         (n,) zoom from which the label is shown.
     fid, rank

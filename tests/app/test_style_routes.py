@@ -100,7 +100,7 @@ def test_style_of_a_dem_dataset_has_hillshade_and_every_url_resolves(server):
     ranks = {entry["rank"] for entry in tilejson["ccsm_cartography"]["schedule"]}
     assert {layer["id"] for layer in style["layers"] if layer["type"] == "line"} == {
         f"contours-rank-{r}" for r in ranks
-    }
+    } | {"coastline"}
     glyphs = style["glyphs"].replace("{fontstack}", FONT).replace("{range}", "0-255")
     assert httpx.get(glyphs).status_code == 200
     z, x, y = tile_for(LON0, LAT0, 13)

@@ -38,7 +38,7 @@ def layers_by_id(style):
     return {layer["id"]: layer for layer in style["layers"]}
 
 
-def test_layers_bottom_to_top_hillshade_lines_labels():
+def test_layers_bottom_to_top_hillshade_lines_coastline_labels():
     ids = [layer["id"] for layer in build_style(source())["layers"]]
     assert ids == [
         "background",
@@ -46,6 +46,7 @@ def test_layers_bottom_to_top_hillshade_lines_labels():
         "contours-rank-0",
         "contours-rank-1",
         "contours-rank-2",
+        "coastline",
         "contour-labels-rank-0",
         "contour-labels-rank-1",
         "contour-labels-rank-2",
@@ -186,3 +187,8 @@ def test_a_label_fades_out_with_its_rank():
     for zoom in (9.6, 9.9, 10.2, 10.6, 10.9, 11.5):
         exact = 0 if zoom <= 9.6 else min(1.0, (2 ** (zoom - 9.6) - 1) / (2**1.3 - 1))
         assert evaluate_label_opacity(expr, zoom, min_zoom=5.0) == pytest.approx(exact, abs=0.03), zoom
+
+
+def test_the_coastline_layer_draws_only_coastline_features():
+    coast = layers_by_id(build_style(source()))["coastline"]
+    assert coast["source-layer"] == "contours" and coast["filter"] == ["==", ["get", "coastline"], True]
