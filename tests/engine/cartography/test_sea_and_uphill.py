@@ -13,14 +13,14 @@ import numpy as np
 import pyproj
 import pytest
 import rasterio
-from engine.build.datasets import SourceSpec, build_dataset
-from engine.build.labels import label_last_zoom
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from real_dems import topobathy
 from scipy import ndimage
 from support.mvt import decode_served
 
+from engine.build.datasets import SourceSpec, build_dataset
+from engine.build.labels import label_last_zoom
 from engine.cartography.dataset import MINUS, dataset_cartography, label_sources
 from engine.cartography.labels import UPSIDE_DOWN_LIMIT_DEG, orient_angle, place_labels
 from engine.cartography.options import CartographyOptions
