@@ -163,7 +163,7 @@ def check_tiles(served: Served) -> int:
             for f in MORPH_FRACTIONS:
                 lines = morph_drawing(morph, z, f)
                 assert not proper_new_crossings(lines, served.allowed), f"crossing in morph {tuple(tile)} at {f}"
-            decode(renderer.label_layer(DATASET, tile))  # the label layer of a tile is served and decodes
+            decode(renderer.label_layer.layer(DATASET, tile))  # the label layer of a tile is served and decodes
     return seen
 
 
