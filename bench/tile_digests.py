@@ -10,8 +10,8 @@ Usage: python bench/tile_digests.py STORE [--cache-mb 512]   (prints one line pe
 from __future__ import annotations
 
 import argparse
-import hashlib
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -23,8 +23,7 @@ def main() -> None:
     from engine.io.source import sample_contours_path
     from engine.serve.renderer import Renderer
     from engine.store.store import CCSStore
-    from engine.tiles.grid import tiles_covering
-    from engine.types import Bounds
+    from tests.support.tile_digests import tile_digests, total_digest
 
     parser = argparse.ArgumentParser()
     parser.add_argument("store", type=Path)
@@ -34,27 +33,14 @@ def main() -> None:
     if "sample" not in store.dataset_ids():
         build_dataset(store, SourceSpec(sample_contours_path(), "sample", "sample"), workers=2)
     renderer = Renderer(store, contour_cache_bytes=int(args.cache_mb * (1 << 20)))
-    info = store.dataset("sample")
-    total = hashlib.sha256()
-    count = 0
 
-    def record(name: str, data: bytes | None) -> None:
-        nonlocal count
-        digest = hashlib.sha256(data or b"").hexdigest()
-        total.update(f"{name} {digest}\n".encode())
-        count += 1
-        print(name, digest)
+    def printed(digests: Iterator[tuple[str, str]]) -> Iterator[tuple[str, str]]:
+        for name, digest in digests:
+            print(name, digest)
+            yield name, digest
 
-    for z in (10, 11, 12, 13, 14):
-        for x, y in [(t[1], t[2]) for t in tiles_covering(Bounds(*info.bounds_3857), z)][::3]:
-            record(f"ccsm {z}/{x}/{y}", renderer.tile("sample", z, x, y).data)
-            record(f"ccsm {z}.5/{x}/{y}", renderer.tile("sample", z, x, y, zoom=z + 0.5).data)
-            record(f"pinned {z}/{x}/{y}", renderer.tile("sample", z, x, y, t=0.3).data)
-            record(f"morph {z}/{x}/{y}", renderer.morph_tile("sample", z, x, y).data)
-            if z >= 12:
-                for method in ("original", "dp", "vw"):
-                    record(f"{method} {z}/{x}/{y}", renderer.tile("sample", z, x, y, method=method).data)
-    print(f"{count} tiles, total {total.hexdigest()}")
+    count, total = total_digest(printed(tile_digests(renderer, "sample")))
+    print(f"{count} tiles, total {total}")
 
 
 if __name__ == "__main__":
