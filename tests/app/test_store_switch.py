@@ -27,7 +27,7 @@ from helpers import tile_for
 
 from engine.errors import StoreError
 from engine.store.store import CCSStore
-from engine.store.switch import CHECK_EVERY_S, StorePointer, publish
+from engine.store.switch import StorePointer, publish
 
 #: Tiles around the synthetic hills at z12 to z14 (most hold contours), asked between the store probes.
 TILES = [
@@ -38,12 +38,14 @@ TILES = [
 ]
 #: Lists the datasets: ``extra`` is in the new store only, so each answer tells which store served it.
 PROBE = "/datasets"
-#: Timing noise the bound allows beyond the follow interval. The bound needs none in principle (a worker looks
-#: at the link when a request starts, at most CHECK_EVERY_S after its last look, and a request starts after it
-#: was sent); this covers the test's own poll of the link and thread wake-ups on a loaded 2-core machine.
+#: The README's promise: a request sent this long after the switch is served from the new file.
+PROMISED_S = 0.25
+#: Timing noise the bound allows beyond the promise. It needs none in principle (a worker looks at the link when
+#: a request starts, at most switch.CHECK_EVERY_S after its last look, and a request starts after it was sent); this
+#: covers the test's own poll of the link and thread wake-ups on a loaded 2-core machine.
 ALLOWANCE_S = 0.05
 #: A request sent this long after a switch is served from the store the switch pointed at.
-SWITCH_BOUND_S = CHECK_EVERY_S + ALLOWANCE_S
+SWITCH_BOUND_S = PROMISED_S + ALLOWANCE_S
 #: Keep-alive clients on each worker (more are opened until each worker holds this many).
 CLIENTS_PER_WORKER = 2
 
@@ -131,6 +133,14 @@ def clients_on_every_worker(server: LiveServer, workers: int) -> list[Client]:
     return kept
 
 
+def warm_up(client: Client, path: str, within_s: float = 120.0) -> None:
+    """Ask ``path`` until it answers 200: the first render of a worker on a loaded machine may pass the deadline."""
+    deadline = time.monotonic() + within_s
+    while (status := client.get(path)[0]) != 200:
+        assert time.monotonic() < deadline, f"{path} still answers {status}"
+        time.sleep(0.5)
+
+
 def hammer(client: Client, paths: list[str], stop: threading.Event, answers: list[Answer]) -> None:
     """Ask ``paths`` in turn until ``stop``."""
     k = 0
@@ -176,6 +186,7 @@ def test_replicas_switch_under_load(tmp_path: Path, built_store: Path, synthetic
             paths = [p for tile in TILES for p in (PROBE, tile)]
             if n % CLIENTS_PER_WORKER == 0:
                 paths = [p for s_ in slow for p in (PROBE, s_)]
+                warm_up(client, slow[-1])
             threads.append(threading.Thread(target=hammer, args=(client, paths, stop, answers)))
         threads.append(threading.Thread(target=watch_link, args=(live, watching, switches)))
         for thread in threads:
