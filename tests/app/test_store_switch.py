@@ -119,18 +119,21 @@ class Client:
         return Answer(self.worker, path, sent, done, status, new_store)
 
 
-def clients_on_every_worker(server: LiveServer, workers: int) -> list[Client]:
-    """Open keep-alive clients until each of the ``workers`` holds CLIENTS_PER_WORKER of them."""
+def clients_on_every_worker(server: LiveServer, workers: int, within_s: float = 300.0) -> list[Client]:
+    """Open keep-alive clients until each of the ``workers`` holds CLIENTS_PER_WORKER of them (/healthz answers
+    once one worker is up; on a loaded machine the other may still be starting its render workers)."""
     by_worker: dict[int, list[Client]] = {}
-    for _ in range(12 * workers):
+    deadline = time.monotonic() + within_s
+    while len(by_worker) < workers or any(len(c) < CLIENTS_PER_WORKER for c in by_worker.values()):
+        assert time.monotonic() < deadline, f"connections reached {len(by_worker)} of {workers} workers"
         client = Client(server)
-        by_worker.setdefault(client.worker, []).append(client)
-        if len(by_worker) == workers and all(len(c) >= CLIENTS_PER_WORKER for c in by_worker.values()):
-            break
-    assert len(by_worker) == workers, f"connections reached {len(by_worker)} of {workers} workers"
-    kept = [c for group in by_worker.values() for c in group[:CLIENTS_PER_WORKER]]
-    assert len(kept) == workers * CLIENTS_PER_WORKER, {w: len(c) for w, c in by_worker.items()}
-    return kept
+        group = by_worker.setdefault(client.worker, [])
+        if len(group) < CLIENTS_PER_WORKER:
+            group.append(client)
+        else:
+            client.conn.close()
+            time.sleep(0.2)
+    return [c for group in by_worker.values() for c in group]
 
 
 def warm_up(client: Client, path: str, within_s: float = 120.0) -> None:
