@@ -119,9 +119,24 @@ class Client:
         return Answer(self.worker, path, sent, done, status, new_store)
 
 
-def clients_on_every_worker(server: LiveServer, workers: int, within_s: float = 300.0) -> list[Client]:
-    """Open keep-alive clients until each of the ``workers`` holds CLIENTS_PER_WORKER of them (/healthz answers
-    once one worker is up; on a loaded machine the other may still be starting its render workers)."""
+def warm_workers(server: LiveServer, workers: int, path: str, within_s: float = 300.0) -> None:
+    """Wait until each of the ``workers`` has answered ``path`` with 200, on connections closed afterwards
+    (/healthz answers once one worker is up; on a loaded machine the other may still be starting, and a first
+    render may pass the deadline)."""
+    warm: set[int] = set()
+    deadline = time.monotonic() + within_s
+    while len(warm) < workers:
+        assert time.monotonic() < deadline, f"{len(warm)} of {workers} workers answered {path} in {within_s} s"
+        client = Client(server)
+        if client.worker not in warm and client.get(path)[0] == 200:
+            warm.add(client.worker)
+        client.conn.close()
+        time.sleep(0.2)
+
+
+def clients_on_every_worker(server: LiveServer, workers: int, within_s: float = 60.0) -> list[Client]:
+    """Open keep-alive clients until each of the (started) ``workers`` holds CLIENTS_PER_WORKER of them; the
+    load must start at once, before an idle connection reaches uvicorn's keep-alive timeout (5 s)."""
     by_worker: dict[int, list[Client]] = {}
     deadline = time.monotonic() + within_s
     while len(by_worker) < workers or any(len(c) < CLIENTS_PER_WORKER for c in by_worker.values()):
@@ -132,16 +147,7 @@ def clients_on_every_worker(server: LiveServer, workers: int, within_s: float = 
             group.append(client)
         else:
             client.conn.close()
-            time.sleep(0.2)
     return [c for group in by_worker.values() for c in group]
-
-
-def warm_up(client: Client, path: str, within_s: float = 120.0) -> None:
-    """Ask ``path`` until it answers 200: the first render of a worker on a loaded machine may pass the deadline."""
-    deadline = time.monotonic() + within_s
-    while (status := client.get(path)[0]) != 200:
-        assert time.monotonic() < deadline, f"{path} still answers {status}"
-        time.sleep(0.5)
 
 
 def hammer(client: Client, paths: list[str], stop: threading.Event, answers: list[Answer]) -> None:
@@ -181,15 +187,15 @@ def test_replicas_switch_under_load(tmp_path: Path, built_store: Path, synthetic
     try:
         server.wait_healthy(timeout=300)  # the machine is shared: two workers may start slowly
         assert httpx.get(server.url + "/datasets/extra").status_code == 404
-        clients = clients_on_every_worker(server, 2)
         # Store probes between tiles on every client; the first client of each worker asks a slow /simplify
         # (a fresh scale each time, nothing cached) in turn, so slow requests are running at the switches.
         slow = [f"/simplify?dataset=hills&method=vw&scale={250_000 + 997 * k}" for k in range(400)]
+        warm_workers(server, 2, slow[-1])
+        clients = clients_on_every_worker(server, 2)
         for n, client in enumerate(clients):
             paths = [p for tile in TILES for p in (PROBE, tile)]
             if n % CLIENTS_PER_WORKER == 0:
                 paths = [p for s_ in slow for p in (PROBE, s_)]
-                warm_up(client, slow[-1])
             threads.append(threading.Thread(target=hammer, args=(client, paths, stop, answers)))
         threads.append(threading.Thread(target=watch_link, args=(live, watching, switches)))
         for thread in threads:
