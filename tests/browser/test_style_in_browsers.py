@@ -229,15 +229,13 @@ def label_strength(label: list, others: list[list], zoom: float) -> float | None
 
 
 def too_steep(a: dict, b: dict) -> list[str]:
-    """Lines (by opacity) and labels (by strength) in the middle of both frames whose style changed faster than
+    """Labels anchored in the middle of both frames whose strength (all style) changed faster than
     FADE_SLOPE per zoom level between them: a fade narrower than the style's."""
     dz = abs(b["zoom"] - a["zoom"])
     bound = FADE_SLOPE * dz + FADE_SLACK
     out = []
-    for k in set(a["middle"]) & set(b["middle"]):
-        if k in a["opacity"] and k in b["opacity"] and abs(b["opacity"][k] - a["opacity"][k]) > bound:
-            change = f"{a['opacity'][k]:.2f} -> {b['opacity'][k]:.2f}"
-            out.append(f"line {k} faded too fast at zoom {b['zoom']:.3f}: opacity {change} in {dz:.3f} zoom")
+    # Lines are not judged here: the plugin cross-fades its two morph buffers over time (their line-opacity
+    # moves within a frame's zoom), so a line's opacity is not the style's alone.
     zoom = max(a["zoom"], b["zoom"])
     for label in (x for x in b["labels"] if x[4]):
         before = label_strength(label, a["labels"], zoom)
