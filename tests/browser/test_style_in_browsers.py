@@ -16,9 +16,10 @@
    edge) and no label anchored in the middle 80 % may change its strength by more than POP_JUMP: everything
    arrives and leaves by fading. A label is the same label in the other frame only where its anchor is within
    SAME_ANCHOR_PX on screen: a label placed anew per zoom is one label gone and another come. And a fade must
-   be as wide as the style's: the style's part of a drawn strength (a line's opacity; a label's strength, all
-   style) follows the map's zoom, so between two frames showing a line or label it may change by at most
-   FADE_SLOPE per zoom level the frames are apart; a fade cut to a fifth of its width is five times as steep.
+   be as wide as the style's: a label's strength (all style) follows the map's zoom, so between two frames
+   showing it, it may change by at most FADE_SLOPE per zoom level the frames are apart; a fade cut to a fifth of
+   its width is five times as steep. (A line's opacity is not judged so: the plugin cross-fades its buffers in
+   time.)
 """
 
 from __future__ import annotations
@@ -37,8 +38,8 @@ from PIL import Image
 #: vanishing of small contours (``morph_fade`` over half a level, drawn at the plugin's step; on this loaded
 #: machine the plugin skips steps, and the largest jump seen was 0.29). A pop (no fade) is a jump of 1.
 POP_JUMP = 0.5
-#: The most the style's part of a drawn strength may change per zoom level between two frames that both show
-#: the line or label (the frames' zoom apart, whatever it is). The style's steepest fades: a label's fade in
+#: The most a label's drawn strength may change per zoom level between two frames that both show
+#: it (the frames' zoom apart, whatever it is). The style's steepest fades: a label's fade in
 #: (LABEL_FADE_IN_ZOOMS = 0.5: 2 per level, drawn as a linear ramp between stops LABEL_RAMP_STEP apart) and a
 #: rank's fade out, exponential base 2 over its span s, steepest at its top: ln 2 * 2^s / (2^s - 1), 1.39 per
 #: level for a span of 1 and 2.37 for a span of 0.5 (a label's fade in under it adds to that).
