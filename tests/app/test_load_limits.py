@@ -5,25 +5,31 @@ the event loop, ``/healthz`` waiting meanwhile. Here a 100,000-vertex line (seco
 machine) plays that part, so the tests stay short: with the default limit the request is refused, and with
 the limit lifted and a 1 s deadline it is cut off while ``/healthz`` keeps answering.
 
-The latency bound on ``/healthz`` (2 s) is a behaviour bound, not a speed claim: a blocked event loop would
-hold it for the whole 10 s of the heavy request.
+``/healthz`` "answers at once" while the heavy request runs: median at most 50 ms, max at most 250 ms (see
+HEALTH_MEDIAN_S). The tests wait for the heavy render worker to gain CPU time before they count on it running.
 """
 
 from __future__ import annotations
 
 import json
 import shutil
+import statistics
 import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import httpx
 import numpy as np
 import psutil
 import pytest
 
+from app.main import create_app
+from app.render.jobs import HEAVY_NICENESS
+from app.routes.styles import FONT_STACK
+from app.settings import Settings
 from engine.build.datasets import SourceSpec, build_dataset
 from engine.store.store import CCSStore
 from tests.app.conftest import LAT0, LON0, LiveServer
@@ -33,10 +39,12 @@ from tests.app.helpers import tile_for
 #: server's 1 s deadline by far even on a quiet machine (wm's cost grows faster than the line; since wm was
 #: compiled, 100,000 vertices took only 1-2 s on a quiet machine, too little for the hang-up test).
 GIANT_VERTICES = 300_000
-#: Bound on /healthz (and on a 503 for a full lane) while the heavy request runs. A behaviour bound, not a
-#: speed claim: a blocked event loop holds /healthz for the whole ~10 s of wm on the giant line, while on a
-#: shared, loaded 2-core machine a free loop still answers in well under a second.
-HEALTH_BOUND_S = 2.0
+#: /healthz while the heavy request runs: its median answer time (the README's "at once"; a free event loop
+#: answers in a few ms on loopback, a blocked one not before the heavy render ends, seconds later).
+HEALTH_MEDIAN_S = 0.050
+#: ... and its slowest answer (and a 503 for a full lane): room for the scheduler of a shared, loaded 2-core
+#: machine to hold the server process for a time slice or two, still 1/10 of the heavy render's cut-off (1 s).
+HEALTH_MAX_S = 0.250
 #: The admin token the writes work will ask for; harmless before it lands.
 TOKEN = "test-token-issue-10"
 
@@ -77,8 +85,12 @@ def start_server(store: Path, sources: list[Path], log: Path, **env: str) -> Liv
         },
         log=log,
     )
-    server.wait_healthy(120)
-    server.wait_ready("giant")
+    try:
+        server.wait_healthy(300)  # a first start on a loaded 2-core machine compiles the kernels: minutes
+        server.wait_ready("giant")
+    except BaseException:
+        server.stop()
+        raise
     return server
 
 
@@ -155,6 +167,39 @@ def render_workers(server: LiveServer) -> set[int]:
     return set()
 
 
+def heavy_worker(server: LiveServer) -> psutil.Process:
+    """The server's heavy render worker: the one running at HEAVY_NICENESS above the server."""
+    base = psutil.Process(server.proc.pid).nice()
+    heavy = []
+    for pid in render_workers(server):
+        try:
+            if psutil.Process(pid).nice() >= base + HEAVY_NICENESS:
+                heavy.append(psutil.Process(pid))
+        except psutil.NoSuchProcess:  # a worker being replaced
+            continue
+    assert len(heavy) == 1, f"want one heavy render worker, found {len(heavy)}"
+    return heavy[0]
+
+
+def cpu_seconds(worker: psutil.Process) -> float:
+    times = worker.cpu_times()
+    return times.user + times.system
+
+
+def wait_heavy_job_runs(worker: psutil.Process, before: float, within_s: float = 30.0) -> None:
+    """Wait until ``worker`` has used 10 ms of CPU more than ``before`` (an idle worker waits on its pipe and
+    uses none): the heavy job is being drawn. On a loaded machine a niced worker may get little CPU."""
+    deadline = time.monotonic() + within_s
+    while True:
+        try:
+            if cpu_seconds(worker) >= before + 0.01:
+                return
+        except psutil.NoSuchProcess:  # the job held it to its deadline, where it was stopped: it ran there
+            return
+        assert time.monotonic() < deadline, f"the heavy render worker did not start the job within {within_s} s"
+        time.sleep(0.005)
+
+
 def alive(pid: int) -> bool:
     try:
         return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
@@ -170,11 +215,14 @@ def wait_one_stopped(workers: set[int], within_s: float, why: str) -> None:
         time.sleep(0.05)
     assert sum(alive(p) for p in workers) == len(workers) - 1
 
+
 def test_issue_10_wm_giant_line_does_not_block_healthz_and_is_cut_at_the_deadline(lenient):
     z, x, y = z2_tile()
     hills = tile_for(LON0, LAT0, 12)
     before = render_workers(lenient)
     assert len(before) == 3  # one light, one morph, one heavy
+    worker = heavy_worker(lenient)
+    idle_cpu = cpu_seconds(worker)
     heavy: dict[str, object] = {}
 
     def ask_heavy() -> None:
@@ -185,17 +233,18 @@ def test_issue_10_wm_giant_line_does_not_block_healthz_and_is_cut_at_the_deadlin
     health: list[float] = []
 
     def poll_health() -> None:
-        while thread.is_alive():
-            start = time.monotonic()
-            r = httpx.get(lenient.url + "/healthz", timeout=10)
-            health.append(time.monotonic() - start if r.status_code == 200 else float("inf"))
-            time.sleep(0.02)
+        with httpx.Client(base_url=lenient.url, timeout=10) as client:  # one connection: time the answer only
+            while thread.is_alive():
+                start = time.monotonic()
+                r = client.get("/healthz")
+                health.append(time.monotonic() - start if r.status_code == 200 else float("inf"))
+                time.sleep(0.02)
 
     thread = threading.Thread(target=ask_heavy)
     thread.start()
     poller = threading.Thread(target=poll_health)
     poller.start()  # /healthz is asked all the time the heavy request runs
-    time.sleep(0.5)  # the heavy request is in the heavy worker now
+    wait_heavy_job_runs(worker, idle_cpu)
     # The heavy lane's one worker is taken and there is no queue: another heavy request gets 503 at once.
     t0 = time.monotonic()
     busy = httpx.get(f"{lenient.url}/simplify?dataset=hills&scale=250000", timeout=10)
@@ -207,8 +256,9 @@ def test_issue_10_wm_giant_line_does_not_block_healthz_and_is_cut_at_the_deadlin
     thread.join()
     poller.join()
     assert busy.status_code == 503 and "busy" in busy.json()["detail"]
-    assert busy.headers["retry-after"] and busy_seconds < HEALTH_BOUND_S
-    assert len(health) >= 2 and max(health) < HEALTH_BOUND_S, health
+    assert busy.headers["retry-after"] and busy_seconds <= HEALTH_MAX_S, busy_seconds
+    assert len(health) >= 5, health
+    assert statistics.median(health) <= HEALTH_MEDIAN_S and max(health) <= HEALTH_MAX_S, health
     assert light and set(light) == {200}  # the light lane kept drawing ccsm tiles meanwhile
     r = heavy["response"]
     assert isinstance(r, httpx.Response)
@@ -237,10 +287,12 @@ def test_issue_10_a_client_that_hangs_up_stops_its_render(patient):
     z, x, y = giant_tile(5)  # wm's slowest zoom on this line
     before = render_workers(patient)
     assert len(before) == 3  # one light, one morph, one heavy
+    worker = heavy_worker(patient)
+    idle_cpu = cpu_seconds(worker)
     host, port = patient.url.removeprefix("http://").split(":")
     client = socket.create_connection((host, int(port)), timeout=30)
     client.sendall(f"GET /tiles/giant/{z}/{x}/{y}.mvt?method=wm HTTP/1.1\r\nHost: x\r\n\r\n".encode())
-    time.sleep(1.0)  # the heavy worker has the request now (wm on this line takes several seconds)
+    wait_heavy_job_runs(worker, idle_cpu)  # wm on this line takes several seconds more
     client.close()
     wait_one_stopped(before, 10, "no worker was stopped: the render runs on for a client that left")
     # A fresh worker takes the stopped one's place, and the lane draws again.
@@ -252,29 +304,74 @@ def test_issue_10_a_client_that_hangs_up_stops_its_render(patient):
     assert r.status_code == 200, r.text
 
 
-GET_ROUTES = [
-    "/healthz",
-    "/datasets",
-    "/datasets/hills",
-    "/tiles/hills/tilejson.json",
-    "/morph/hills/tilejson.json",
-    "/simplify?scale=250000&dataset=hills",
-    "/docs",
-    "/openapi.json",
-    "/",
-]
+#: A value for each path parameter of the app's GET routes (a new parameter needs one here).
+PATH_EXAMPLES = {
+    "dataset": "hills",
+    "z": "{z}",
+    "x": "{x}",
+    "y": "{y}",
+    "fontstack": FONT_STACK,
+    "glyph_range": "0-255",
+    "family": FONT_STACK.rsplit(" ", 1)[0].lower().replace(" ", "-"),  # "dejavu-sans"
+    "variant": "400",
+}
+#: Query parameters of the app's GET routes: each required one needs a value here (given where declared).
+QUERY_EXAMPLES = {"scale": "250000", "dataset": "hills"}
 
 
-@pytest.mark.parametrize("path", GET_ROUTES + ["TILE", "MORPH"])
-def test_head_answers_like_get_without_a_body(strict, path):
+def get_routes(routes: list, prefix: str = "") -> Iterator[Any]:
+    """Every GET route of the app, into included routers (FastAPI keeps them nested) and mounted apps."""
+    for route in routes:
+        included = getattr(route, "original_router", None)
+        if included is not None:
+            yield from get_routes(included.routes, prefix + route.include_context.prefix)
+        elif "GET" in (getattr(route, "methods", None) or ()):
+            yield prefix, route
+        elif getattr(route, "routes", None):  # a Mount of a router (a static files mount has none)
+            yield from get_routes(route.routes, prefix + route.path)
+
+
+def example_url(prefix: str, route: Any) -> str:
+    """The route's path with example values, and its required query parameters."""
     z, x, y = tile_for(LON0, LAT0, 12)
-    path = {"TILE": f"/tiles/hills/{z}/{x}/{y}.mvt", "MORPH": f"/morph/hills/{z}/{x}/{y}.mvt"}.get(path, path)
+    path = (prefix + route.path).format(**PATH_EXAMPLES).format(z=z, x=x, y=y)
+    params = getattr(route, "dependant", None)
+    query = (
+        [q for q in params.query_params if q.field_info.is_required() or q.alias in QUERY_EXAMPLES] if params else []
+    )
+    return path + ("?" + "&".join(f"{q.alias}={QUERY_EXAMPLES[q.alias]}" for q in query) if query else "")
+
+
+def app_get_urls() -> list[str]:
+    """One example URL per GET route the app declares, built from the app itself (no list to keep)."""
+    app = create_app(Settings(store_path=Path("/nonexistent/ccsm-route-list.sqlite")))
+    return sorted({example_url(prefix, route) for prefix, route in get_routes(app.router.routes)})
+
+
+APP_GET_URLS = app_get_urls()
+#: Headers that differ between any two answers (not between HEAD and GET).
+PER_ANSWER = {"date", "x-request-id", "server-timing"}
+
+
+def test_the_route_list_covers_the_app() -> None:
+    """The walk into included routers finds the routes a hand-written list once missed."""
+    for path in ("/healthz", "/readyz", "/styles/hills/style.json", "/simplify?scale=250000&dataset=hills"):
+        assert path in APP_GET_URLS, APP_GET_URLS
+    for start in ("/fonts/", "/hillshade/hills/", "/tiles/hills/", "/morph/hills/", "/docs"):
+        assert any(url.startswith(start) for url in APP_GET_URLS), (start, APP_GET_URLS)
+    assert len(APP_GET_URLS) >= 17, APP_GET_URLS  # the app's 17 GET routes when this was written
+
+
+@pytest.mark.parametrize("path", APP_GET_URLS)
+def test_head_answers_like_get_without_a_body(strict, path):
     get = httpx.get(strict.url + path, timeout=30)
     head = httpx.head(strict.url + path, timeout=30)
-    assert get.status_code == 200
-    assert head.status_code == 200 and head.content == b""
-    for name in ("content-type", "content-length", "etag", "cache-control"):
-        assert head.headers.get(name) == get.headers.get(name), name
+    assert head.status_code == get.status_code, (get.status_code, get.text[:200])
+    assert head.content == b""
+    same = {k: v for k, v in get.headers.items() if k not in PER_ANSWER}
+    assert {k: v for k, v in head.headers.items() if k not in PER_ANSWER} == same
+    if not path.startswith("/hillshade/"):  # 'hills' has no DEM: its hillshade is a 404, HEAD included
+        assert get.status_code == 200, get.text[:200]
 
 
 def test_tilejson_ignores_a_hostile_host_header(strict):
