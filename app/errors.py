@@ -17,6 +17,11 @@ class UploadTooLarge(CCSMError):
     """A request body exceeds CCSM_MAX_UPLOAD_MB."""
 
 
+class ContourTooLong(UploadTooLarge):
+    """An upload holds a contour of more vertices than CCSM_MAX_CONTOUR_VERTICES (413): it would hold a build
+    worker for minutes."""
+
+
 class DatasetExists(CCSMError):
     """A dataset of that id exists already."""
 

@@ -17,10 +17,11 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
-from app.errors import MalformedUpload
+from app.errors import ContourTooLong, MalformedUpload
 from app.render.jobs import HEAVY_NICENESS, lower_priority
 from engine.build.datasets import source_hash
 from engine.cartography.options import CartographyOptions, check_schedule_fits
+from engine.ccsm.contour_size import OversizedContour, oversized_contours
 from engine.errors import CCSMError
 from engine.io.source import read_source
 from engine.io.vertical_units import elevation_units
@@ -37,6 +38,8 @@ class UploadCheck:
     ----------
     hash_params
         The build parameters that go into the upload's content hash (``UploadParams.as_dict()``).
+    max_contour_vertices
+        The most vertices one contour may have (``CCSM_MAX_CONTOUR_VERTICES``); None = no limit.
     """
 
     path: Path
@@ -45,6 +48,7 @@ class UploadCheck:
     hash_params: dict[str, Any]
     cartography: CartographyOptions | None = None
     source_scale: float | None = None
+    max_contour_vertices: int | None = None
 
 
 @dataclass(frozen=True)
@@ -81,9 +85,15 @@ def check_upload(job: UploadCheck) -> CheckedUpload:
     ------
     MalformedUpload, SourceError, InvalidParameter
         The document or its contours are unusable (the message names the features and parameters).
+    ContourTooLong
+        A contour has more than ``job.max_contour_vertices`` vertices (the message names it, its count and
+        the limit).
     """
     check_document(job.path)
     contour_set = read_source(job.path, elevation_field=job.elevation_field, interval=job.interval)
+    oversized = oversized_contours(contour_set.contours, job.max_contour_vertices)
+    if oversized:
+        raise contour_too_long(oversized, job.max_contour_vertices or 0)
     if job.source_scale is not None:  # a schedule override must fit the data's interval (docs/design.md section 9)
         check_schedule_fits(job.cartography, contour_set.interval, job.source_scale)
     shown = contour_set.bad_features[:BAD_FEATURES_SHOWN]
@@ -95,6 +105,17 @@ def check_upload(job: UploadCheck) -> CheckedUpload:
         digest=source_hash(job.path, job.hash_params),  # the same hash as of the body's bytes
         units=elevation_units(job.path, job.elevation_field),
         checker_pid=os.getpid(),
+    )
+
+
+def contour_too_long(oversized: list[OversizedContour], limit: int) -> ContourTooLong:
+    """The 413 for contours over the limit: the first one named with its count, how many more there are."""
+    first = oversized[0]
+    more = f"; {len(oversized) - 1} more contours exceed it too" if len(oversized) > 1 else ""
+    return ContourTooLong(
+        f"feature {first.id!r} has {first.vertices} vertices, more than the {limit} one contour may have "
+        f"(CCSM_MAX_CONTOUR_VERTICES={limit}){more}; split long lines (a MultiLineString's parts count "
+        "one by one) or simplify them before uploading"
     )
 
 

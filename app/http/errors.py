@@ -21,6 +21,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from app.errors import (
     BuildQueueFull,
     ClientGone,
+    ContourTooLong,
     DatasetExists,
     MalformedUpload,
     NotAuthenticated,
@@ -58,6 +59,7 @@ STATUS_CODES: dict[type[Exception], int] = {
     WriteForbidden: 403,
     DatasetExists: 409,
     UploadTooLarge: 413,
+    ContourTooLong: 413,  # a contour too long to build in seconds
     UnsupportedMediaType: 415,
     BuildQueueFull: 429,
     StoreUnwritable: 507,

@@ -57,7 +57,7 @@ def get_dataset(
         401: {"description": "CCSM_ADMIN_TOKEN is set and the bearer token is missing or wrong."},
         403: {"description": "No token is set and the client is not local (writes are loopback-only)."},
         409: {"description": "The dataset id exists (ready, building or failed)."},
-        413: {"description": "Larger than CCSM_MAX_UPLOAD_MB."},
+        413: {"description": "Larger than CCSM_MAX_UPLOAD_MB, or a contour above CCSM_MAX_CONTOUR_VERTICES."},
         415: {"description": "The body is not application/geo+json or application/json."},
         429: {
             "description": "Too many builds run and wait (CCSM_MAX_BUILDS, CCSM_BUILD_QUEUE), or too many uploads "
@@ -137,7 +137,8 @@ async def upload_dataset(
     incoming = await receive_upload(request, service.upload_dir, settings.max_upload_bytes)
     try:
         job = UploadCheck(
-            incoming, elevation_field, interval, params.as_dict(), params.cartography, params.source_scale
+            incoming, elevation_field, interval, params.as_dict(), params.cartography, params.source_scale,
+            max_contour_vertices=settings.max_contour_vertices or None,
         )
         checked = await unless_client_goes(request, get_upload_checker(request).check(job))
     except BaseException:
