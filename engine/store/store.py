@@ -90,22 +90,9 @@ def pieces_sql(kind: str, by_fid: bool) -> str:
 
 class CCSStore(BuildBook):
     """One SQLite store file of built datasets (and of the builds under way, :class:`BuildBook`).
-    Thread-safe: each thread gets its own connection.
-
-    Parameters
-    ----------
-    path
-        The file; created (with its directory) if missing.
-    readonly
-        Open without creating or migrating (for a second process that only reads).
-    mmap_bytes
-        Read up to this much of the file through memory mapping (SQLite's ``mmap_size``; 0: SQLite's default,
-        none); see :class:`~engine.store.connection.StoreFile`.
-
-    Raises
-    ------
-    StoreError
-        The file is not a ccsm store, is of another format, or cannot be opened.
+    Thread-safe: each thread gets its own connection. It is opened as a
+    :class:`~engine.store.connection.StoreFile` is (the same parameters ``path``, ``readonly`` and ``mmap_bytes``,
+    and the same :class:`~engine.errors.StoreError` when the file cannot serve as a store).
     """
 
     # -- datasets ----------------------------------------------------------------------------------------
