@@ -54,13 +54,12 @@ class DatasetInfo:
 
 
 @dataclass(frozen=True)
-class ContourRecord:
-    """One stored contour, decoded: every array a tile or /simplify needs.
+class ContourColumns:
+    """The columns of one contour that a build writes and a reader gets back (:class:`NewContour`,
+    :class:`ContourRecord`).
 
     Attributes
     ----------
-    fid
-        Stable integer id of the row (MVT feature id).
     base, top
         (M, 2) CCS rows in EPSG:3857 metres (a ring as a closed path).
     original
@@ -77,8 +76,6 @@ class ContourRecord:
         grid unit is u skips rows below u / 2.
     """
 
-    fid: int
-    dataset: str
     contour_id: str
     elevation: float
     closed: bool
@@ -95,6 +92,23 @@ class ContourRecord:
     sig: NDArray[np.float32]
     sig_top: NDArray[np.float32]
     sig_original: NDArray[np.float32]
+
+
+@dataclass(frozen=True)
+class ContourRecord(ContourColumns):
+    """One stored contour, decoded: every array a tile or /simplify needs (the columns of
+    :class:`ContourColumns`).
+
+    Attributes
+    ----------
+    fid
+        Stable integer id of the row (MVT feature id).
+    dataset
+        The dataset's id.
+    """
+
+    fid: int
+    dataset: str
 
     @property
     def nbytes(self) -> int:
@@ -126,30 +140,14 @@ class StoredPieces:
 
 
 @dataclass(frozen=True)
-class NewContour:
+class NewContour(ContourColumns):
     """One contour row to write: what :class:`ContourRecord` reads back, plus its R*Tree box.
 
     ``box`` is (minx, maxx, miny, maxy) in EPSG:3857 of every row the contour can draw; ``n_input`` is the
     number of input vertices.
     """
 
-    contour_id: str
-    elevation: float
-    closed: bool
-    group: int
-    vanish_scale: float
-    length_m: float
     n_input: int
-    base: Coords
-    top: Coords
-    original: Coords
-    original_w: Coords
-    t_at_scale: NDArray[np.float64]
-    sim_t: NDArray[np.float64]
-    sim: NDArray[np.float64]
-    sig: NDArray[np.float32]
-    sig_top: NDArray[np.float32]
-    sig_original: NDArray[np.float32]
     box: tuple[float, float, float, float]
     #: (step, reason) of each per-contour step the build could not finish (the contour is served without it).
     issues: tuple[tuple[str, str], ...] = ()

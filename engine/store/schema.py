@@ -16,7 +16,25 @@ PIECE_ROWS = 256
 #: original, sig_original); kind ``k`` is stored in tables ``k_pieces`` and ``k_piece_rtree``.
 PIECE_KINDS = {"ccs": ("base", "top", "sig", "sig_top"), "original": ("original", "sig_original")}
 
-SCHEMA = """
+
+def _piece_tables(kind: str) -> str:
+    """The tables of one kind of stored pieces (:data:`PIECE_KINDS`): its pieces, indexed by fid, and their R*Tree."""
+    columns = ",\n".join(f"    {name} BLOB NOT NULL" for name in PIECE_KINDS[kind])
+    return f"""CREATE TABLE IF NOT EXISTS {kind}_pieces(
+    piece INTEGER PRIMARY KEY,
+    fid INTEGER NOT NULL,
+    k INTEGER NOT NULL,
+{columns}
+);
+CREATE INDEX IF NOT EXISTS {kind}_pieces_fid ON {kind}_pieces(fid);
+CREATE VIRTUAL TABLE IF NOT EXISTS {kind}_piece_rtree USING rtree(piece, minx, maxx, miny, maxy, +dataset TEXT);
+"""
+
+
+#: Written from PIECE_KINDS, so the tables and the columns the store reads and writes cannot drift apart.
+_PIECE_TABLES = "".join(_piece_tables(kind) for kind in PIECE_KINDS)
+
+SCHEMA = f"""
 CREATE TABLE IF NOT EXISTS store_meta(key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS datasets(
     id TEXT PRIMARY KEY,
@@ -64,27 +82,7 @@ CREATE TABLE IF NOT EXISTS contours(
     sig_original BLOB NOT NULL
 );
 CREATE INDEX IF NOT EXISTS contours_dataset ON contours(dataset);
-CREATE TABLE IF NOT EXISTS ccs_pieces(
-    piece INTEGER PRIMARY KEY,
-    fid INTEGER NOT NULL,
-    k INTEGER NOT NULL,
-    base BLOB NOT NULL,
-    top BLOB NOT NULL,
-    sig BLOB NOT NULL,
-    sig_top BLOB NOT NULL
-);
-CREATE INDEX IF NOT EXISTS ccs_pieces_fid ON ccs_pieces(fid);
-CREATE VIRTUAL TABLE IF NOT EXISTS ccs_piece_rtree USING rtree(piece, minx, maxx, miny, maxy, +dataset TEXT);
-CREATE TABLE IF NOT EXISTS original_pieces(
-    piece INTEGER PRIMARY KEY,
-    fid INTEGER NOT NULL,
-    k INTEGER NOT NULL,
-    original BLOB NOT NULL,
-    sig_original BLOB NOT NULL
-);
-CREATE INDEX IF NOT EXISTS original_pieces_fid ON original_pieces(fid);
-CREATE VIRTUAL TABLE IF NOT EXISTS original_piece_rtree USING rtree(piece, minx, maxx, miny, maxy, +dataset TEXT);
-CREATE TABLE IF NOT EXISTS labels(
+{_PIECE_TABLES}CREATE TABLE IF NOT EXISTS labels(
     dataset TEXT PRIMARY KEY,
     data_version INTEGER NOT NULL,
     last_zoom REAL NOT NULL,

@@ -21,7 +21,7 @@ import sqlite3
 import time
 from collections.abc import Callable, Iterable, Sequence
 from itertools import chain
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -71,6 +71,8 @@ from engine.store.staging import (
 STAGE_CONTOURS = 64
 STAGE_ROWS = 100_000
 
+T = TypeVar("T")
+
 
 def pieces_sql(kind: str, by_fid: bool) -> str:
     """The query of :meth:`CCSStore.pieces_meeting`: pieces of ``kind`` whose box meets (minx, maxx, miny, maxy),
@@ -88,22 +90,9 @@ def pieces_sql(kind: str, by_fid: bool) -> str:
 
 class CCSStore(BuildBook):
     """One SQLite store file of built datasets (and of the builds under way, :class:`BuildBook`).
-    Thread-safe: each thread gets its own connection.
-
-    Parameters
-    ----------
-    path
-        The file; created (with its directory) if missing.
-    readonly
-        Open without creating or migrating (for a second process that only reads).
-    mmap_bytes
-        Read up to this much of the file through memory mapping (SQLite's ``mmap_size``; 0: SQLite's default,
-        none); see :class:`~engine.store.connection.StoreFile`.
-
-    Raises
-    ------
-    StoreError
-        The file is not a ccsm store, is of another format, or cannot be opened.
+    Thread-safe: each thread gets its own connection. It is opened as a
+    :class:`~engine.store.connection.StoreFile` is (the same parameters ``path``, ``readonly`` and ``mmap_bytes``,
+    and the same :class:`~engine.errors.StoreError` when the file cannot serve as a store).
     """
 
     # -- datasets ----------------------------------------------------------------------------------------
@@ -355,14 +344,7 @@ class CCSStore(BuildBook):
     def load_heads(self, fids: Sequence[int]) -> list[ContourHead]:
         """The per-contour columns of contours by fid, without their rows (in the order given; unknown fids
         are skipped)."""
-        out: dict[int, ContourHead] = {}
-        con = self._con()
-        for i in range(0, len(fids), 500):
-            chunk = list(fids[i : i + 500])
-            marks = ",".join("?" * len(chunk))
-            for r in con.execute(f"SELECT {HEAD_COLUMNS} FROM contours WHERE fid IN ({marks})", chunk):
-                out[r[0]] = contour_head(r)
-        return [out[f] for f in fids if f in out]
+        return self._contours_by_fid(HEAD_COLUMNS, contour_head, fids)
 
     def dataset_heads(
         self, dataset: str
@@ -393,11 +375,16 @@ class CCSStore(BuildBook):
 
     def load(self, fids: Sequence[int]) -> list[ContourRecord]:
         """Decode contour rows by fid (in the order given; unknown fids are skipped)."""
-        out: dict[int, ContourRecord] = {}
+        return self._contours_by_fid(CONTOUR_COLUMNS, contour_record, fids)
+
+    def _contours_by_fid(self, columns: str, decode: Callable[[Any], T], fids: Sequence[int]) -> list[T]:
+        """``decode`` of the ``columns`` (fid first) of each contour row by fid, in the order given (unknown fids
+        are skipped); asked 500 fids at a time, below SQLite's limit on bound parameters."""
+        out: dict[int, T] = {}
         con = self._con()
         for i in range(0, len(fids), 500):
             chunk = list(fids[i : i + 500])
             marks = ",".join("?" * len(chunk))
-            for r in con.execute(f"SELECT {CONTOUR_COLUMNS} FROM contours WHERE fid IN ({marks})", chunk):
-                out[r[0]] = contour_record(r)
+            for r in con.execute(f"SELECT {columns} FROM contours WHERE fid IN ({marks})", chunk):
+                out[r[0]] = decode(r)
         return [out[f] for f in fids if f in out]

@@ -51,21 +51,30 @@ def assert_bad_input(done: subprocess.CompletedProcess[str], *words: str) -> str
     return message
 
 
+def simplify_refuses(tmp_path: Path, name: str, text: str, *words: str) -> str:
+    """``ccsm simplify`` of a file ``name`` holding ``text``: :func:`assert_bad_input` of it with ``words``."""
+    source = tmp_path / name
+    source.write_text(text)
+    return assert_bad_input(
+        ccsm("simplify", source, "-o", tmp_path / "o.geojson", "--store", tmp_path / "s.sqlite"), *words
+    )
+
+
 def test_an_empty_feature_collection_says_the_file_has_no_features(tmp_path: Path) -> None:
-    empty = tmp_path / "empty.geojson"
-    empty.write_text('{"type": "FeatureCollection", "features": []}')
-    message = assert_bad_input(
-        ccsm("simplify", empty, "-o", tmp_path / "o.geojson", "--store", tmp_path / "s.sqlite"),
+    message = simplify_refuses(
+        tmp_path,
+        "empty.geojson",
+        '{"type": "FeatureCollection", "features": []}',
         "empty.geojson: the file has no features",
     )
     assert "elevation" not in message
 
 
 def test_a_file_that_is_not_geojson_is_told_in_ccsm_words(tmp_path: Path) -> None:
-    text = tmp_path / "notes.geojson"
-    text.write_text("these are my notes, not contours\n")
-    message = assert_bad_input(
-        ccsm("simplify", text, "-o", tmp_path / "o.geojson", "--store", tmp_path / "s.sqlite"),
+    message = simplify_refuses(
+        tmp_path,
+        "notes.geojson",
+        "these are my notes, not contours\n",
         "notes.geojson: the file could not be read as contour lines",
         "GeoJSON",
         "GeoPackage",
@@ -88,12 +97,12 @@ def test_a_dem_without_interval_names_the_option(tmp_path: Path, command: str) -
 
 
 def test_a_contour_file_without_elevation_names_the_option(tmp_path: Path) -> None:
-    unnamed = tmp_path / "unnamed.geojson"
     line = {"type": "LineString", "coordinates": [[-84.25, 36.6], [-84.24, 36.61]]}
-    unnamed.write_text(json.dumps({"type": "FeatureCollection", "features": [
-        {"type": "Feature", "properties": {"alt": 400}, "geometry": line}]}))
-    message = assert_bad_input(
-        ccsm("simplify", unnamed, "-o", tmp_path / "o.geojson", "--store", tmp_path / "s.sqlite"),
+    feature = {"type": "Feature", "properties": {"alt": 400}, "geometry": line}
+    message = simplify_refuses(
+        tmp_path,
+        "unnamed.geojson",
+        json.dumps({"type": "FeatureCollection", "features": [feature]}),
         "unnamed.geojson: no elevation field found",
         "available fields: alt",
         "give --elevation-field NAME",

@@ -14,7 +14,6 @@ import os
 import re
 import subprocess
 import sys
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -23,6 +22,7 @@ import numpy as np
 import pytest
 from conftest import LAT0, LON0, REPO, make_settings, synthetic_features, write_geojson
 from fastapi.testclient import TestClient
+from support.server import wait_ready
 from typer.testing import CliRunner
 
 from app.cli import _register_commands, app
@@ -88,16 +88,6 @@ def service(store: Path, source: Path, fault: str, monkeypatch: pytest.MonkeyPat
         yield c
 
 
-def detail_once_built(client: TestClient, dataset: str, timeout: float = 300.0) -> dict:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        d = client.get(f"/datasets/{dataset}").json()
-        if d["state"] in ("ready", "failed"):
-            return d
-        time.sleep(0.2)
-    raise TimeoutError(dataset)
-
-
 def fid_of(store: CCSStore, dataset: str, contour_id: str) -> int:
     (fid,) = [r.fid for r in store.load(store.all_fids(dataset)) if r.contour_id == contour_id]
     return fid
@@ -112,7 +102,7 @@ def test_one_contour_failing_a_step_is_served_without_it_and_listed(
 ) -> None:
     store_path = tmp_path / "ccsm.sqlite"
     with service(store_path, issue_source, fault, monkeypatch) as client:
-        d = detail_once_built(client, "issues")
+        d = wait_ready(client, "issues", timeout=300.0)
         assert d["state"] == "ready", d["build"]
         store = CCSStore(store_path, readonly=True)
         fid = fid_of(store, "issues", contour)
@@ -142,7 +132,7 @@ def test_the_same_build_without_a_fault_labels_solo_and_lists_nothing(
     and 'speck' (first labelled past the last zoom) no longer stops the build."""
     store_path = tmp_path / "ccsm.sqlite"
     with service(store_path, issue_source, "", monkeypatch) as client:
-        d = detail_once_built(client, "issues")
+        d = wait_ready(client, "issues", timeout=300.0)
     assert d["state"] == "ready", d["build"]
     assert (d["contour_issues"], d["counts"]["contour_issues"]) == ([], 0)
     store = CCSStore(store_path, readonly=True)
@@ -155,7 +145,7 @@ def test_a_dataset_none_of_whose_contours_can_be_served_fails_naming_step_and_co
     tmp_path: Path, issue_source: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     with service(tmp_path / "ccsm.sqlite", issue_source, "surface+input:*", monkeypatch) as client:
-        d = detail_once_built(client, "issues")
+        d = wait_ready(client, "issues", timeout=300.0)
     assert d["state"] == "failed"
     error = d["build"]["error"]
     assert re.search(r"nothing to serve: none of the \d+ contour\(s\) could be built; contour 'h0': surface step "
