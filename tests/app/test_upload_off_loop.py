@@ -56,8 +56,10 @@ def forked_children(server: LiveServer) -> set[int]:
 
 
 def start(tmp: Path, **env: str) -> LiveServer:
+    # The uploads here are long lines on purpose (a parse that takes a while): no per-contour vertex limit.
+    base = {"CCSM_STORE_PATH": str(tmp / "ccsm.sqlite"), "CCSM_SERVE_SAMPLE": "false", "CCSM_MAX_UPLOAD_MB": "30"}
     server = LiveServer(
-        {"CCSM_STORE_PATH": str(tmp / "ccsm.sqlite"), "CCSM_SERVE_SAMPLE": "false", "CCSM_MAX_UPLOAD_MB": "30", **env},
+        {**base, "CCSM_MAX_CONTOUR_VERTICES": "0", **env},
         log=tmp / "server.log",
     )
     server.wait_healthy(300)
