@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO, free_port
 from support.processes import stop_process
 from synthetic_rasters import fractal_heights, write_geotiff
 
@@ -20,6 +19,7 @@ from engine.serve.renderer import Renderer
 from engine.store.store import CCSStore
 from engine.tiles.grid import tiles_covering
 from engine.types import Bounds
+from tests.app.conftest import REPO, free_port
 
 DASK = Path(sys.executable).with_name("dask")
 DATASET = "terrain"

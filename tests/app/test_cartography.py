@@ -14,7 +14,6 @@ import numpy as np
 import pyogrio.raw
 import pytest
 import shapely
-from conftest import LAT0, LON0, LiveServer, synthetic_features
 from helpers import EXTENT, check_tile, grid_to_lonlat, tile_for
 from support.mvt import decode
 from support.server import wait_ready
@@ -22,6 +21,7 @@ from typer.testing import CliRunner
 
 from app.cli import _register_commands, app
 from engine.store.store import CCSStore
+from tests.app.conftest import LAT0, LON0, LiveServer, synthetic_features
 
 _register_commands()
 

@@ -14,11 +14,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO
 from typer.testing import CliRunner
 
 from app.cli import _register_commands, app
 from engine.io.source import sample_dem_path
+from tests.app.conftest import REPO
 
 _register_commands()
 

@@ -20,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import LAT0, LON0, REPO, make_settings, synthetic_features, write_geojson
 from fastapi.testclient import TestClient
 from support.server import wait_ready
 from typer.testing import CliRunner
@@ -28,6 +27,7 @@ from typer.testing import CliRunner
 from app.cli import _register_commands, app
 from app.main import create_app
 from engine.store.store import CCSStore
+from tests.app.conftest import LAT0, LON0, REPO, make_settings, synthetic_features, write_geojson
 
 pytestmark = pytest.mark.slow
 

@@ -22,12 +22,12 @@ from pathlib import Path
 import httpx
 import psutil
 import pytest
-from conftest import LAT0, LON0, REPO, LiveServer
 from helpers import tile_for
 
 from engine.errors import StoreError
 from engine.store.store import CCSStore
 from engine.store.switch import StorePointer, publish
+from tests.app.conftest import LAT0, LON0, REPO, LiveServer
 
 #: Tiles around the synthetic hills at z12 to z14 (most hold contours), asked between the store probes.
 TILES = [
