@@ -1,7 +1,8 @@
 """The ccsm-morph plugin (web/plugin) in Chromium: a real mouse-wheel zoom through one level fetches each
 morph tile once, asks for nothing while the zoom stays inside the level, draws at least 32 distinct shapes and
 never a frame without contours; from the service (the project's page) and from a .pmtiles archive on a static
-file server that answers Range requests (written by `ccsm export`), with the tile service stopped.
+file server that answers Range requests (written by `ccsm export`), with the tile service stopped, drawn by the
+oldest and by the newest MapLibre of the plugin's peer range (a MapLibre 4 page never settles: the range says so).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from typing import Any
 import httpx
 import pytest
 from conftest import REPO, SERVICE_STORES, service_stopped
+from maplibre_versions import PAGE_MAPLIBRE, install_maplibre, installed_version, peer_range, versions_in_range
 from morph_pmtiles import morph_pmtiles_from_service
 from morph_probe import install_probe, read_probe, wheel_through_level
 from static_server import serve_static
@@ -117,15 +119,32 @@ def morph_archive(service_url: str, tmp_path_factory: pytest.TempPathFactory) ->
     return out
 
 
-@pytest.fixture
-def static_site(morph_archive: Path) -> Iterator[Any]:
-    """The plugin's example page, MapLibre, the plugin and the archive on a static Range-capable server."""
+@pytest.fixture(scope="session")
+def maplibre_builds(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[str, Path]]:
+    """The oldest and the newest MapLibre of the plugin's peer range: (version, dist folder) of each."""
+    releases = versions_in_range(peer_range())
+    oldest, newest = releases[0], releases[-1]
+    assert installed_version(PAGE_MAPLIBRE) == oldest, (
+        f"the page pins MapLibre {installed_version(PAGE_MAPLIBRE)}; the plugin claims {peer_range()} from {oldest}"
+    )
+    newest_dist = install_maplibre(newest, tmp_path_factory.mktemp("maplibre")) if newest != oldest else None
+    return {"oldest": (oldest, PAGE_MAPLIBRE / "dist"), "newest": (newest, newest_dist or PAGE_MAPLIBRE / "dist")}
+
+
+@pytest.fixture(params=["oldest", "newest"])
+def static_site(
+    request: pytest.FixtureRequest, morph_archive: Path, maplibre_builds: dict[str, tuple[str, Path]]
+) -> Iterator[Any]:
+    """The plugin's example page, MapLibre (the oldest or the newest the plugin claims), the plugin and the
+    archive on a static Range-capable server; ``server.maplibre_version`` says which MapLibre it serves."""
+    version, dist = maplibre_builds[request.param]
     mounts = {
-        "/vendor/maplibre-gl/": WEB / "node_modules" / "maplibre-gl" / "dist",
+        "/vendor/maplibre-gl/": dist,
         "/web/": WEB,
         "/data/": morph_archive.parent,
     }
     with serve_static(mounts) as server:
+        server.maplibre_version = version
         yield server
 
 
@@ -141,6 +160,8 @@ def test_static_pmtiles_without_the_service(browser, service_url, static_site, m
         with service_stopped(service_url):
             page.goto(f"{static_site.url}/web/plugin/example/index.html?url=pmtiles:///data/{morph_archive.name}")
             page.wait_for_function("() => window.contours && window.contours.settled", timeout=20_000)
+            drawn_by = page.evaluate("() => import('maplibre-gl').then((m) => m.getVersion())")
+            assert drawn_by == static_site.maplibre_version
             page.evaluate("(c) => map.jumpTo({center: c, zoom: 11})", CENTRE)
             page.wait_for_function("() => contours.settled && contours.shownZoom === 11", timeout=20_000)
             ranges_before = len(static_site.requests_for(".pmtiles"))
