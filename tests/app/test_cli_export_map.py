@@ -133,7 +133,9 @@ def test_the_page_and_every_module_it_imports_are_in_the_folder(cone_map: tuple[
     assert (folder / "js" / "maplibre-gl" / "maplibre-gl-worker.mjs").is_file()  # loaded beside maplibre-gl.mjs
 
 
-def test_a_map_without_the_pages_modules_exits_2_before_any_work(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_map_without_the_pages_modules_exits_2_before_any_work(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setenv("CCSM_WEB_DIR", str(tmp_path / "web"))
     result = run("export", CONE, "--interval", "20", "--store", tmp_path / "c.sqlite", "-o", tmp_path / "site")
     assert result.exit_code == 2, result.output

@@ -43,7 +43,8 @@ CANVAS_PNG = """(expr) => new Promise((resolve) => {
     m.triggerRepaint();
 })"""
 #: The texts of the labels on screen, sorted.
-LABEL_TEXTS = """([expr, ids]) => eval(expr).queryRenderedFeatures({layers: ids}).map((f) => f.properties.label).sort()"""
+LABEL_TEXTS = """([expr, ids]) =>
+    eval(expr).queryRenderedFeatures({layers: ids}).map((f) => f.properties.label).sort()"""
 
 
 @pytest.fixture(scope="module")
@@ -94,7 +95,9 @@ def service_views(app: Any, size: dict[str, int]) -> list[tuple[dict[str, float]
     page.evaluate(
         """(paper) => {
             const m = window.ccsm.maps.a;
-            for (const id of ['extent-fill', 'extent-line']) if (m.getLayer(id)) m.setLayoutProperty(id, 'visibility', 'none');
+            for (const id of ['extent-fill', 'extent-line']) {
+                if (m.getLayer(id)) m.setLayoutProperty(id, 'visibility', 'none');
+            }
             m.setPaintProperty('background', 'background-color', paper);
         }""",
         paper,
@@ -124,7 +127,7 @@ def test_exported_folder_draws_the_services_map_without_the_service(
     app: Any, browser: Any, service_url: str, static_map: RangeServer, exported_map: Path
 ) -> None:
     app.open()
-    size = app.page.evaluate("() => { const c = window.ccsm.maps.a.getCanvas(); return {width: c.width, height: c.height}; }")
+    size = app.page.evaluate("() => ({width: ccsm.maps.a.getCanvas().width, height: ccsm.maps.a.getCanvas().height})")
     assert app.page.evaluate("() => window.devicePixelRatio") == 1
     expected = service_views(app, size)
 
