@@ -128,7 +128,7 @@ def export(
         typer.Option(
             "--out",
             "-o",
-            help="Output: FILE.pmtiles (PMTiles v3) or FILE.mbtiles, or a FOLDER (no such extension) for the whole "
+            help="Output: FILE.pmtiles (PMTiles v3) or FILE.mbtiles, or a FOLDER (no extension) for the whole "
             "map: contours.pmtiles, style.json, index.html, fonts/, js/ and, from a DEM, contours-hillshade.pmtiles.",
             show_default=False,
         ),
@@ -193,7 +193,10 @@ def export(
     source_scale = check_scale("--source-scale", source_scale)
     target_scale = check_scale("--target-scale", target_scale)
     check_report(report)
-    folder = None if out.suffix.lower() in FORMATS else out
+    suffix = out.suffix.lower()
+    if suffix and suffix not in FORMATS:
+        fail(f"{out.name}: unknown archive extension {suffix!r}; use .pmtiles, .mbtiles, or a folder for the whole map")
+    folder = out if not suffix else None
     if folder is not None:
         out = folder / MAP_ARCHIVE
     with bad_input_exits():

@@ -57,8 +57,7 @@ def page_files(web_dir: Path) -> list[tuple[Path, str]]:
         raise InvalidParameter(
             f"the map page needs {missing[0]}"
             + (f" and {len(missing) - 1} more files" if len(missing) > 1 else "")
-            + f": run `npm ci` in {web_dir} (and in {web_dir / 'plugin'}),"
-            " or give -o FILE.pmtiles for the archive alone"
+            + f": run `npm ci` in {web_dir}, or give -o FILE.pmtiles for the archive alone"
         )
     return files
 
