@@ -1,6 +1,8 @@
-"""``ccsm export``: a static PMTiles or MBTiles archive of a dataset's morph tiles (docs/morph-tiles.md).
+"""``ccsm export``: a static PMTiles or MBTiles archive of a dataset's morph tiles (docs/morph-tiles.md), or the
+whole map as a folder for a static host: the archive, the service's style, glyphs, hillshade and a page.
 
-The work is :func:`engine.serve.export.export_dataset`; this module resolves what to export (a source file,
+The work is :func:`engine.serve.export.export_dataset` (and :mod:`engine.serve.static_map`,
+:mod:`engine.serve.static_page` for a folder); this module resolves what to export (a source file,
 built into the cache store by content hash as ``ccsm simplify`` does, or a dataset of a store), checks the
 options and shows progress. Bad input ends with a one-line message and exit status 2 (app/cli/__init__.py).
 """
@@ -9,7 +11,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.progress import (
@@ -50,6 +52,9 @@ from app.cli.contour_issues import issues_phrase, report_contour_issues, report_
 from app.cli.lazy_progress import LazyProgress
 from app.cli.terrain_options import BboxOption, DemZoomOption, names_a_source, open_source
 
+if TYPE_CHECKING:
+    from app.settings import Settings
+
 
 def _progress() -> Progress:
     return Progress(
@@ -64,16 +69,21 @@ def _progress() -> Progress:
     )
 
 
-def _service_store() -> Path:
-    """The store ``ccsm build`` and ``ccsm serve`` use [env CCSM_STORE_PATH; var/ccsm.sqlite]."""
+def _settings() -> Settings:
+    """The service's settings (env CCSM_*), or exit 2 naming the bad one."""
     from pydantic import ValidationError
 
     from app.settings import Settings
 
     try:
-        return Settings().store_path
+        return Settings()
     except ValidationError as exc:
         fail(f"invalid settings: {exc.errors()[0].get('msg', exc)}")
+
+
+def _service_store() -> Path:
+    """The store ``ccsm build`` and ``ccsm serve`` use [env CCSM_STORE_PATH; var/ccsm.sqlite]."""
+    return _settings().store_path
 
 
 def _stored_dataset(store: Path, dataset: str, what: str) -> None:
@@ -88,12 +98,39 @@ def _stored_dataset(store: Path, dataset: str, what: str) -> None:
         fail(f"{what}: no such file, nor a dataset of {store} (datasets: {held})")
 
 
+#: The morph archive's name in an exported map folder.
+MAP_ARCHIVE = "contours.pmtiles"
+
+
+def _write_map(store_path: Path, dataset: str, folder: Path, archive: Path, minzoom: int, maxzoom: int) -> str:
+    """Write the rest of the map beside ``archive`` (style, glyphs, hillshade, page); a phrase saying what."""
+    from engine.serve.renderer import Renderer
+    from engine.serve.static_map import write_static_map
+    from engine.serve.static_page import write_page
+    from engine.store.store import CCSStore
+
+    renderer = Renderer(CCSStore(store_path, readonly=True))
+    info, _ = renderer.info(dataset)
+    settings = _settings()
+    with LazyProgress(_progress, "hillshade tiles") as progress:
+        static = write_static_map(
+            info, renderer.cartography(dataset), archive, minzoom, maxzoom, settings.font_path, progress.update
+        )
+    write_page(folder, settings.web_dir)
+    shade = f", hillshade {static.hillshade_tiles} tiles" if static.hillshade else ""
+    return f"\n{folder}: index.html, style.json, {len(static.glyphs)} glyph ranges{shade}; serve the folder as it is"
+
+
 @app.command()
 def export(
     out: Annotated[
         Path,
         typer.Option(
-            "--out", "-o", help="Output archive: FILE.pmtiles (PMTiles v3) or FILE.mbtiles.", show_default=False
+            "--out",
+            "-o",
+            help="Output: FILE.pmtiles (PMTiles v3) or FILE.mbtiles, or a FOLDER (no extension) for the whole "
+            "map: contours.pmtiles, style.json, index.html, fonts/, js/ and, from a DEM, contours-hillshade.pmtiles.",
+            show_default=False,
         ),
     ],
     source: Annotated[
@@ -136,14 +173,19 @@ def export(
     depth_labels: DepthLabelsOption = "negative",
     label_orientation: LabelOrientationOption = "uphill",
 ) -> None:
-    """Write the morph tiles of a source or stored dataset to a PMTiles or MBTiles archive (gzip MVT).
+    """Write the morph tiles of a source or stored dataset to a PMTiles or MBTiles archive (gzip MVT), or the
+    whole map to a folder that any Range-capable static host serves (README.md, "Static hosting").
 
     Every tile of --minzoom .. --maxzoom over the dataset's bounds is rendered on every core, exactly as
     ``GET /morph/{dataset}/{z}/{x}/{y}.mvt`` serves it; empty tiles are left out. The archive is written to a
-    temporary file and renamed when complete, so a failed export leaves an existing file as it was.
+    temporary file and renamed when complete, so a failed export leaves an existing file as it was. A folder
+    gets the archive as contours.pmtiles and beside it the service's style (style.json), the label glyphs
+    (fonts/), the hillshade of a DEM as PNG tiles (contours-hillshade.pmtiles) and index.html with the modules
+    it loads (js/, copied from web/ and its npm packages).
     """
     from engine.serve.export import check_zoom_range, export_dataset
-    from engine.tiles.archives import check_writable
+    from engine.serve.static_page import page_files
+    from engine.tiles.archives import FORMATS, check_writable
 
     started = time.perf_counter()
     if workers is not None and workers < 1:
@@ -151,8 +193,16 @@ def export(
     source_scale = check_scale("--source-scale", source_scale)
     target_scale = check_scale("--target-scale", target_scale)
     check_report(report)
+    suffix = out.suffix.lower()
+    if suffix and suffix not in FORMATS:
+        fail(f"{out.name}: unknown archive extension {suffix!r}; use .pmtiles, .mbtiles, or a folder for the whole map")
+    folder = out if not suffix else None
+    if folder is not None:
+        out = folder / MAP_ARCHIVE
     with bad_input_exits():
         check_zoom_range(minzoom, maxzoom)
+        if folder is not None:
+            page_files(_settings().web_dir)  # a missing module fails before any work
         check_writable(out)  # before any build: an unwritable or unknown target fails at once
         cartography = cartography_options(
             units, index_every, attribute_names, schedule, attribution, sea, depth_labels, label_orientation
@@ -188,6 +238,7 @@ def export(
                 workers=workers,
                 progress=progress.update,
             )
+        written = _write_map(store_path, dataset_id, folder, out, minzoom, maxzoom) if folder is not None else ""
     from engine.store.store import CCSStore
 
     stored = CCSStore(store_path, readonly=True)
@@ -198,7 +249,7 @@ def export(
     console.print(
         f"{out}: {result.tiles} tiles ({result.format}, gzip MVT, z{minzoom}-{maxzoom}; {result.empty} empty left "
         f"out), {result.bytes / 1e6:.2f} MB; {issues_phrase(issues)}; tiles {result.seconds:.1f} s, "
-        f"total {time.perf_counter() - started:.1f} s",
+        f"total {time.perf_counter() - started:.1f} s{written}",
         highlight=False,
         soft_wrap=True,
     )

@@ -17,8 +17,7 @@ from app.routes.params import DatasetPath, ServiceDep, SettingsDep
 from app.service import lonlat_bounds
 from app.settings import Settings
 from engine.cartography.glyphs import glyph_range_pbf
-from engine.cartography.schedule import NEVER, Schedule
-from engine.cartography.style import FONT_STACK, RankFade, StyleSource, build_style
+from engine.cartography.style import FONT_STACK, StyleSource, build_style, rank_fades
 from engine.errors import InvalidParameter, UnknownLayer
 from engine.serve.relief import relief_dem_path
 
@@ -30,12 +29,6 @@ STYLE_MAX_AGE_S = 60
 GLYPHS_MAX_AGE_S = 86_400
 #: Glyph ranges kept in memory (each about 100 kB; MapLibre asks for one or two for Latin text).
 GLYPH_CACHE_RANGES = 16
-
-def rank_fades(schedule: Schedule) -> list[RankFade]:
-    """The fade range of each rank of a dataset's schedule (the top rank, at NEVER, never hides)."""
-    return [
-        RankFade(r.rank, r.fade_zoom, None if r.hide_zoom == NEVER else r.hide_zoom) for r in schedule.ranks
-    ]
 
 
 @router.get("/styles/{dataset}/style.json", name="get_style")

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from engine.cartography.schedule import NEVER, Schedule
 from engine.errors import InvalidParameter
 
 #: The one font stack the service serves (app/routes/styles.py makes its glyphs from DejaVu Sans).
@@ -121,6 +122,11 @@ class StyleSource:
     hillshade_maxzoom: int = 14
     attribution: str = ""
     webfonts_url: str | None = None
+
+
+def rank_fades(schedule: Schedule) -> list[RankFade]:
+    """The fade range of each rank of a dataset's schedule (the top rank, at NEVER, never hides)."""
+    return [RankFade(r.rank, r.fade_zoom, None if r.hide_zoom == NEVER else r.hide_zoom) for r in schedule.ranks]
 
 
 def fade_opacity(fade: RankFade) -> float | list[Any]:

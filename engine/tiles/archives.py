@@ -55,6 +55,7 @@ class ArchiveMeta:
     description: str = ""
     attribution: str = ""
     version: str = "1.0.0"
+    format: str = "pbf"
     extra: dict[str, Any] = field(default_factory=dict)
 
     def tilejson(self) -> dict[str, Any]:
@@ -65,7 +66,7 @@ class ArchiveMeta:
             "attribution": self.attribution,
             "version": self.version,
             "type": "overlay",
-            "format": "pbf",
+            "format": self.format,
             "minzoom": self.minzoom,
             "maxzoom": self.maxzoom,
             "bounds": list(self.bounds),
@@ -200,10 +201,12 @@ class _ArchiveWriter:
 
 
 class PMTilesArchive(_ArchiveWriter):
-    """A PMTiles v3 archive of gzip-compressed MVT tiles being written (see the module docstring)."""
+    """A PMTiles v3 archive being written (see the module docstring): gzip-compressed MVT tiles, or with
+    ``png=True`` PNG images as they are (PNG is compressed already)."""
 
-    def __init__(self, path: str | os.PathLike[str]) -> None:
+    def __init__(self, path: str | os.PathLike[str], *, png: bool = False) -> None:
         super().__init__(path)
+        self.png = png
         try:
             self._file: BinaryIO = open(self.tmp, "wb")  # noqa: SIM115 - closed by commit/abort
         except OSError as exc:
@@ -217,8 +220,8 @@ class PMTilesArchive(_ArchiveWriter):
         # Directories, metadata and header.
         west, south, east, north = meta.bounds
         header: dict[str, Any] = {
-            "tile_type": TileType.MVT,
-            "tile_compression": Compression.GZIP,
+            "tile_type": TileType.PNG if self.png else TileType.MVT,
+            "tile_compression": Compression.NONE if self.png else Compression.GZIP,
             "min_lon_e7": e7(west),
             "min_lat_e7": e7(south),
             "max_lon_e7": e7(east),

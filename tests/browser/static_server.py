@@ -16,6 +16,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
+from urllib.parse import unquote
 
 RANGE = re.compile(r"^bytes=(\d*)-(\d*)$")
 TYPES = {".js": "text/javascript", ".mjs": "text/javascript", ".pmtiles": "application/octet-stream"}
@@ -53,7 +54,7 @@ def parse_range(header: str | None, size: int) -> tuple[int, int] | None | str:
 
 def resolve(mounts: dict[str, Path], url_path: str) -> Path | None:
     """The file a URL path names under the longest matching mount, or None (nothing outside the folders)."""
-    path = url_path.split("?")[0]
+    path = unquote(url_path.split("?")[0])  # as any static host: "%20" names a space
     for prefix in sorted(mounts, key=len, reverse=True):
         if path.startswith(prefix):
             root = mounts[prefix].resolve()
