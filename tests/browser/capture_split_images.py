@@ -1,5 +1,6 @@
 """Make the README's pictures of the split view at three scales (docs/img/split-*.png): CCSM beside
-Douglas–Peucker on the project's page, both through the dataset's style, 1000 x 560 px.
+Douglas–Peucker on the project's page, both through the dataset's style, 1000 x 560 px, saved with a 64-colour
+palette (a fifth of the bytes; the page's flat colours lose nothing visible).
 
 Run against a running service:  python tests/browser/capture_split_images.py http://127.0.0.1:8000 [OUT_DIR]
 Not a test (pytest does not collect it); it reuses the browser settings of chromium_launch.py.
@@ -12,6 +13,7 @@ import time
 from pathlib import Path
 
 import httpx
+from PIL import Image
 from playwright.sync_api import sync_playwright
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -39,6 +41,14 @@ def settle(page, timeout_s: float = 120) -> None:
     page.wait_for_timeout(500)  # label fades (fadeDuration 300 ms) run out
 
 
+def save_small(png: bytes, path: Path) -> None:
+    """Write a screenshot as a 64-colour PNG."""
+    import io
+
+    image = Image.open(io.BytesIO(png)).convert("RGB")
+    image.quantize(colors=64, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE).save(path, optimize=True)
+
+
 def main(base: str, out: Path = OUT) -> None:
     out.mkdir(parents=True, exist_ok=True)
     w, s, e, n = httpx.get(f"{base}/tiles/sample/tilejson.json", timeout=60).json()["bounds"]
@@ -54,7 +64,8 @@ def main(base: str, out: Path = OUT) -> None:
             zoom = float(zoom_for_scale(scale, lat))
             page.evaluate("([c, z]) => window.ccsm.maps.a.jumpTo({center: c, zoom: z})", [[lon, lat], zoom])
             settle(page)
-            page.screenshot(path=str(out / name), timeout=60_000)
+            png = page.screenshot(timeout=60_000)
+            save_small(png, out / name)
             print(f"1:{scale:,} (zoom {zoom:.2f}) -> {out / name}")
         browser.close()
 
