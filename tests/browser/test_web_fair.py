@@ -130,7 +130,8 @@ def test_every_map_attribution_is_in_view(app):
         assert attribution and attribution["height"] > 0, pane
         # Inside its own map and above the status bar (readout and legend), which overlaps no map.
         assert attribution["y"] + attribution["height"] <= min(bar["y"], canvas["y"] + canvas["height"]) + 0.5
-        assert canvas["x"] <= attribution["x"] and attribution["x"] + attribution["width"] <= canvas["x"] + canvas["width"]
+        right = attribution["x"] + attribution["width"]
+        assert canvas["x"] <= attribution["x"] and right <= canvas["x"] + canvas["width"], pane
 
 
 def test_single_view_baseline_fades_its_ranks(app):
