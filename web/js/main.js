@@ -8,7 +8,7 @@ import {datasetLabel, initialDataset, tilejsonUrl} from './datasets.js';
 import {tooltipText, tReadout, zoomReadout} from './readout.js';
 import {formatScale, quantiseZoom, scaleDenominator} from './scale.js';
 import {installDropZone, uploadDataset} from './upload.js';
-import {contourLineLayers, contourSourceId, hillshadeOf, labelLayers, styleUrl} from './stylerules.js';
+import {comparisonLayers, contourLineLayers, contourSourceId, hillshadeOf, labelLayers, styleUrl} from './stylerules.js';
 
 const METHOD_NAMES = {
   ccsm: 'CCSM',
@@ -54,7 +54,10 @@ const app = {
   lastTStats: null,
   datasetList: [],
   listPoll: null,
-  labelLayerIds: [], // the label layers of the dataset's style on map a
+  lineLayers: null, // the contour line layers of the dataset's style (every method draws them), or null
+  labelLayerIds: new Map(), // map -> ids of the label layers of the dataset's style drawn on it
+  mapBLoaded: false,
+  pointer: null, // {map, point, clientX, clientY} of the mouse over a map, for the tooltip (null: off the maps)
 };
 const {state} = app;
 
@@ -155,7 +158,10 @@ function ensureMapB() {
   maps.a.on('move', sync(maps.a, maps.b));
   maps.b.on('move', sync(maps.b, maps.a));
   maps.b.on('load', () => {
+    app.mapBLoaded = true;
     maps.b.jumpTo({center: maps.a.getCenter(), zoom: maps.a.getZoom()});
+    drawCartography(maps.b, state.style);
+    app.layers.split.setStyleLayers(app.lineLayers);
     applyView();
   });
   return maps.b;
@@ -163,8 +169,18 @@ function ensureMapB() {
 
 function wireMap(map) {
   map.on('move', scheduleReadout);
-  map.on('mousemove', (e) => hover(map, e));
-  map.on('mouseout', () => ($('tooltip').hidden = true));
+  // The tooltip describes what is under the mouse now: it goes while the map moves (the contour under it
+  // changes, or morphs) and comes back, read anew, once the map is idle again.
+  map.on('move', hideTooltip);
+  map.on('idle', () => app.pointer?.map === map && hover(map, app.pointer));
+  map.on('mousemove', (e) => {
+    app.pointer = {map, point: e.point, clientX: e.originalEvent.clientX, clientY: e.originalEvent.clientY};
+    if (!map.isMoving()) hover(map, app.pointer);
+  });
+  map.on('mouseout', () => {
+    app.pointer = null;
+    hideTooltip();
+  });
   map.on('error', (e) => {
     // Tile errors of our sources are reported by MorphingContours; anything else is shown here.
     if (e.sourceId && /^m\d+-src-/.test(e.sourceId)) return;
@@ -198,6 +214,7 @@ function applyView() {
   $('compare-field').classList.toggle('hidden-field', state.view === 'single');
   $('label-a').textContent = METHOD_NAMES[state.method];
   $('label-b').textContent = METHOD_NAMES[state.compare];
+  hideTooltip(); // it named the method or view that was shown: read anew when the map is idle
 
   const {morph} = app;
   layers.main.setOptions({method: state.method, t: state.t, morph});
@@ -215,7 +232,7 @@ function applyView() {
   if (maps.b) {
     if (splitOn && paneWasHidden) maps.b.jumpTo({center: maps.a.getCenter(), zoom: maps.a.getZoom()});
     maps.b.resize();
-    if (maps.b.isStyleLoaded()) {
+    if (app.mapBLoaded) {
       setExtent(maps.b, tj?.bounds);
       layers.split.setOptions({method: state.compare, t: state.t, morph});
       const want = splitOn && tj ? tj : null;
@@ -226,6 +243,7 @@ function applyView() {
   scheduleReadout();
 }
 
+/** The legend: the method of each pane (split), or of each line colour (overlay), or the one method shown. */
 function renderLegend() {
   const legend = $('legend');
   if (!state.tilejson) {
@@ -233,13 +251,18 @@ function renderLegend() {
     return;
   }
   legend.hidden = false;
-  const rows = [[COLOR_MAIN, METHOD_NAMES[state.method], false]];
-  if (state.view === 'overlay') rows.push([COLOR_COMPARE, METHOD_NAMES[state.compare], true]);
+  const main = METHOD_NAMES[state.method];
+  const compare = METHOD_NAMES[state.compare];
+  const rows = {
+    single: [[COLOR_MAIN, main, '']],
+    split: [[COLOR_MAIN, `Left: ${main}`, ''], [COLOR_MAIN, `Right: ${compare}`, '']],
+    overlay: [[COLOR_MAIN, main, ''], [COLOR_COMPARE, `${compare} (thin, on top)`, ' thin']],
+  }[state.view] ?? [[COLOR_MAIN, main, '']];
   legend.replaceChildren(
-    ...rows.map(([color, name, dashed]) => {
+    ...rows.map(([color, name, kind]) => {
       const div = document.createElement('div');
       const sw = document.createElement('span');
-      sw.className = `swatch${dashed ? ' dashed' : ''}`;
+      sw.className = `swatch${kind}`;
       sw.style.borderTopColor = color;
       div.append(sw, name);
       return div;
@@ -274,26 +297,31 @@ function updateReadout() {
   $('readout-t').textContent = tReadout(state.t, state.method, app.lastTStats);
 }
 
-function hover(map, e) {
+function hideTooltip() {
+  $('tooltip').hidden = true;
+  for (const map of Object.values(app.maps)) if (map) map.getCanvas().style.cursor = '';
+}
+
+/** Show what lies under the mouse (`at`: {point, clientX, clientY} on `map`), named by the method drawing it. */
+function hover(map, at) {
   const layers = allLayers().filter((l) => l && l.map === map);
   const ids = layers.flatMap((l) => l.visibleLayerIds);
   const tip = $('tooltip');
   if (!ids.length) {
-    tip.hidden = true;
+    hideTooltip();
     return;
   }
-  const {x, y} = e.point;
+  const {x, y} = at.point;
   const features = map.queryRenderedFeatures([[x - 4, y - 4], [x + 4, y + 4]], {layers: ids});
   if (!features.length) {
-    tip.hidden = true;
-    map.getCanvas().style.cursor = '';
+    hideTooltip();
     return;
   }
   const f = features[0];
   const owner = layers.find((l) => l.visibleLayerIds.includes(f.layer.id));
   tip.textContent = tooltipText(f.properties, METHOD_NAMES[owner?.method] ?? '');
-  tip.style.left = `${e.originalEvent.clientX + 12}px`;
-  tip.style.top = `${e.originalEvent.clientY + 12}px`;
+  tip.style.left = `${at.clientX + 12}px`;
+  tip.style.top = `${at.clientY + 12}px`;
   tip.hidden = false;
   map.getCanvas().style.cursor = 'crosshair';
 }
@@ -346,7 +374,7 @@ async function selectDataset(id, {fit = true} = {}) {
   const mapA = app.maps.a;
   await whenStyleLoaded(mapA);
   setExtent(mapA, tj.bounds);
-  applyCartography(mapA, style);
+  applyStyle(style);
   if (fit) {
     if (tj.bounds) mapA.fitBounds(tj.bounds, {padding: 30, animate: false});
     else if (tj.center) mapA.jumpTo({center: [tj.center[0], tj.center[1]], zoom: tj.center[2] ?? 10});
@@ -386,16 +414,30 @@ async function styleFor(id) {
 }
 
 /**
- * Draw a dataset the way its style.json says: hillshade under everything, the contour lines by rank with
- * their fade and index weight (through the morphing layer), and the labels on top from the per-level tiles.
+ * Draw a dataset the way its style.json says, whichever method each layer shows: the contour lines by rank
+ * with their fade and index weight (through the morphing layers; the overlay's compared method as a thin line
+ * of its own colour), and on each map the hillshade under everything and the labels on top.
  */
-function applyCartography(map, style) {
-  for (const id of app.labelLayerIds) if (map.getLayer(id)) map.removeLayer(id);
-  app.labelLayerIds = [];
+function applyStyle(style) {
+  const lines = style ? contourLineLayers(style) : null;
+  app.lineLayers = lines;
+  const {main, overlay, split} = app.layers;
+  main.setStyleLayers(lines);
+  overlay.setStyleLayers(lines ? comparisonLayers(lines, COLOR_COMPARE) : null);
+  $('hillshade-field').hidden = !hillshadeOf(style);
+  drawCartography(app.maps.a, style);
+  if (app.mapBLoaded) {
+    split.setStyleLayers(lines);
+    drawCartography(app.maps.b, style);
+  }
+}
+
+/** The style's hillshade (under the contours) and labels (from the per-level tiles) on one map. */
+function drawCartography(map, style) {
+  for (const id of app.labelLayerIds.get(map) ?? []) if (map.getLayer(id)) map.removeLayer(id);
+  app.labelLayerIds.set(map, []);
   if (map.getLayer(HILLSHADE_LAYER)) map.removeLayer(HILLSHADE_LAYER);
   for (const id of [HILLSHADE_SOURCE, LABEL_SOURCE]) if (map.getSource(id)) map.removeSource(id);
-  app.layers.main.setStyleLayers(style ? contourLineLayers(style) : null);
-  $('hillshade-field').hidden = !hillshadeOf(style);
   if (!style) return;
   const hillshade = hillshadeOf(style);
   if (hillshade) {
@@ -408,7 +450,7 @@ function applyCartography(map, style) {
     map.addSource(LABEL_SOURCE, {...contours});
     for (const layer of labelLayers(style, LABEL_SOURCE)) {
       map.addLayer(layer);
-      app.labelLayerIds.push(layer.id);
+      app.labelLayerIds.get(map).push(layer.id);
     }
   }
 }
@@ -479,8 +521,9 @@ function wireControls() {
   hillshade.checked = state.hillshade;
   hillshade.onchange = () => {
     state.hillshade = hillshade.checked;
-    const map = app.maps.a;
-    if (map.getLayer(HILLSHADE_LAYER)) map.setLayoutProperty(HILLSHADE_LAYER, 'visibility', state.hillshade ? 'visible' : 'none');
+    for (const map of Object.values(app.maps)) {
+      if (map?.getLayer(HILLSHADE_LAYER)) map.setLayoutProperty(HILLSHADE_LAYER, 'visibility', state.hillshade ? 'visible' : 'none');
+    }
   };
   pin.onchange = applyT;
   slider.oninput = applyT;
@@ -528,9 +571,11 @@ window.ccsm = {
   settled() {
     const used = layersInUse();
     if (!state.tilejson || !used.length) return false;
-    const a = app.maps.a;
-    for (const id of [LABEL_SOURCE, HILLSHADE_SOURCE]) {
-      if (a?.getSource(id) && !a.isSourceLoaded(id)) return false;
+    const maps = [app.maps.a, state.view === 'split' ? app.maps.b : null].filter(Boolean);
+    for (const map of maps) {
+      for (const id of [LABEL_SOURCE, HILLSHADE_SOURCE]) {
+        if (map.getSource(id) && !map.isSourceLoaded(id)) return false;
+      }
     }
     return used.every((l) => {
       if (!l.settled || l.map.isMoving()) return false;
@@ -544,7 +589,13 @@ window.ccsm = {
   layerStates: () => layersInUse().map((l) => l.state()),
   /** The ids of the label layers and of the hillshade layer on map a (the dataset's style.json). */
   get cartography() {
-    return {labelLayerIds: [...app.labelLayerIds], hillshadeLayerId: app.maps.a?.getLayer(HILLSHADE_LAYER) ? HILLSHADE_LAYER : null};
+    return this.cartographyOf('a');
+  },
+  /** The same on map `name` ('a', or 'b' of the split view). */
+  cartographyOf(name) {
+    const map = app.maps[name];
+    const labelLayerIds = [...(app.labelLayerIds.get(map) ?? [])];
+    return {labelLayerIds, hillshadeLayerId: map?.getLayer(HILLSHADE_LAYER) ? HILLSHADE_LAYER : null};
   },
   /** The CcsmMorph of the dataset (null: no morph tiles, or the plugin is not loaded). */
   get morph() {

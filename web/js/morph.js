@@ -3,8 +3,9 @@
 // The map zoom is quantised to eighths, q = floor(zoom * 8) / 8. Each q (with the method and the pinned t) is
 // one MapLibre vector source whose tiles ask the service for `zoom=q`. When q changes we never call setTiles on
 // the visible source (that blanks it): a new "pending" source is added with its layers at opacity 0, and once
-// all its tiles in view have arrived the layers are switched to full opacity and the old source is removed in
-// the same frame. So the old geometry stays on screen until the new geometry is ready.
+// all its tiles in view have arrived the layers are switched to their own opacity (the style's fade) and the old
+// source is removed in the same frame. So the old geometry stays on screen until the new geometry is ready.
+// Every buffer draws the dataset style's line layers (setStyleLayers), whichever method it shows.
 //
 // Overtaken loads: if q moves on while a pending source is still loading, the pending source is removed, which
 // makes MapLibre abort its tile requests (our protocol's AbortController). A pending load that has been running
@@ -55,7 +56,7 @@ export class MorphingContours {
     this._counter = 0;
     this.morph = null; // a CcsmMorph of the dataset's morph tiles, or null
     this._plugin = null; // the plugin's MorphLayer while it draws this layer
-    this.styleLayers = null; // the dataset style's contour line layers the plugin draws (null: plain lines)
+    this.styleLayers = null; // the dataset style's contour line layers every buffer draws (null: plain lines)
     this._pluginSwaps = 0;
     this._handlers = {
       render: () => this.update(),
@@ -127,14 +128,19 @@ export class MorphingContours {
   }
 
   /**
-   * Draw the continuous morph with these style layers (the dataset's style.json line layers, without a
-   * source: see stylerules.js) instead of the two plain ones; null goes back to the plain ones.
+   * Draw with these style layers (the dataset's style.json line layers, without a source: see stylerules.js)
+   * instead of the two plain ones, both the continuous morph and the eighth-swap of every other method; null
+   * goes back to the plain ones.
    */
   setStyleLayers(layers) {
     const next = layers?.length ? layers : null;
     if (next === this.styleLayers) return;
     this.styleLayers = next;
     this._removePlugin();
+    this._removeBuffer(this.pending);
+    this._removeBuffer(this._active);
+    this.pending = null;
+    this._active = null;
     this.update();
   }
 
@@ -247,33 +253,17 @@ export class MorphingContours {
     if (tj.bounds) source.bounds = tj.bounds;
     if (tj.attribution) source.attribution = tj.attribution;
     this.map.addSource(sourceId, source);
-    const opacity = firstBuffer ? 1 : 0;
-    const base = {
-      type: 'line',
-      source: sourceId,
-      'source-layer': SOURCE_LAYER,
-      layout: {'line-join': 'round', 'line-cap': 'round'},
-    };
-    const dash = this.dasharray ? {'line-dasharray': this.dasharray} : {};
-    const layers = [
-      {
-        ...base,
-        id: `${sourceId}-line`,
-        filter: ['!', ['to-boolean', ['get', 'index']]],
-        paint: {'line-color': this.color, 'line-width': 0.8, 'line-opacity': opacity, ...dash},
-      },
-      {
-        ...base,
-        id: `${sourceId}-index`,
-        filter: ['to-boolean', ['get', 'index']],
-        paint: {'line-color': this.color, 'line-width': 1.8, 'line-opacity': opacity, ...dash},
-      },
-    ];
+    const specs = this._bufferLayers(sourceId);
+    // A buffer being loaded is drawn at opacity 0 (a hidden layer would load no tiles); its own opacity (the
+    // style's fade, or 1) is put back when it is swapped in.
+    const opacities = specs.map((l) => l.paint['line-opacity'] ?? 1);
+    const layers = specs.map((l, i) => ({...l, paint: {...l.paint, 'line-opacity': firstBuffer ? opacities[i] : 0}}));
     for (const layer of layers) this.map.addLayer(layer, this.beforeId);
     return {
       sourceId,
       protocolKey,
       layerIds: layers.map((l) => l.id),
+      opacities,
       q,
       key,
       method: this.method,
@@ -281,6 +271,33 @@ export class MorphingContours {
       started: performance.now(),
       sawTile: false,
     };
+  }
+
+  /**
+   * The line layers of one eighth-swap buffer: the dataset style's (setStyleLayers), so every method is drawn
+   * with the same rank fades and index weight as CCSM; without a style, two plain ones (index heavier).
+   */
+  _bufferLayers(sourceId) {
+    const base = {source: sourceId, 'source-layer': SOURCE_LAYER};
+    if (this.styleLayers) {
+      return this.styleLayers.map((l) => ({...l, ...base, id: `${sourceId}-${l.id}`, paint: {...l.paint}}));
+    }
+    const plain = {...base, type: 'line', layout: {'line-join': 'round', 'line-cap': 'round'}};
+    const dash = this.dasharray ? {'line-dasharray': this.dasharray} : {};
+    return [
+      {
+        ...plain,
+        id: `${sourceId}-line`,
+        filter: ['!', ['to-boolean', ['get', 'index']]],
+        paint: {'line-color': this.color, 'line-width': 0.8, ...dash},
+      },
+      {
+        ...plain,
+        id: `${sourceId}-index`,
+        filter: ['to-boolean', ['get', 'index']],
+        paint: {'line-color': this.color, 'line-width': 1.8, ...dash},
+      },
+    ];
   }
 
   _removeBuffer(buffer) {
@@ -323,7 +340,7 @@ export class MorphingContours {
 
   _swap() {
     const p = this.pending;
-    for (const id of p.layerIds) this.map.setPaintProperty(id, 'line-opacity', 1);
+    p.layerIds.forEach((id, i) => this.map.setPaintProperty(id, 'line-opacity', p.opacities[i]));
     const old = this._active;
     this._active = p;
     this.pending = null;

@@ -53,3 +53,22 @@ export function labelLayers(style, sourceId) {
   const labels = (style?.layers ?? []).filter((l) => l.type === 'symbol' && l['source-layer'] === 'contour_labels');
   return labels.map((l) => ({...l, source: sourceId}));
 }
+
+/** Width of the compared method's lines in the overlay (CSS px): below the style's thinnest line (0.7 px). */
+export const COMPARE_LINE_WIDTH = 0.5;
+
+/**
+ * The style's contour line layers for the compared method of the overlay: the same ranks, filters and fades,
+ * in one contrasting colour and as a hairline drawn over the main method's lines, whose heavier index lines
+ * show on both sides of it, and whose other lines show beside it wherever the two methods differ.
+ */
+export function comparisonLayers(lines, color) {
+  return lines.map((l) => ({
+    ...l,
+    paint: {
+      ...l.paint,
+      'line-color': color,
+      'line-width': ['*', COMPARE_LINE_WIDTH, ['coalesce', ['get', 'morph_fade'], 1]],
+    },
+  }));
+}

@@ -1,7 +1,15 @@
 import assert from 'node:assert/strict';
 import {test} from 'node:test';
 
-import {contourLineLayers, contourSourceId, hillshadeOf, labelLayers, styleUrl} from '../js/stylerules.js';
+import {
+  COMPARE_LINE_WIDTH,
+  comparisonLayers,
+  contourLineLayers,
+  contourSourceId,
+  hillshadeOf,
+  labelLayers,
+  styleUrl,
+} from '../js/stylerules.js';
 
 const STYLE = {
   version: 8,
@@ -62,4 +70,17 @@ test('labels read from the given source', () => {
   assert.equal(label.source, 'page-labels');
   assert.equal(label['source-layer'], 'contour_labels');
   assert.equal(labelLayers({layers: []}, 'x').length, 0);
+});
+
+test("the overlay's compared method keeps the style's filters and fades, in its own colour and thinner", () => {
+  const lines = contourLineLayers(STYLE);
+  const compared = comparisonLayers(lines, '#1b63c6');
+  assert.equal(compared.length, lines.length);
+  compared.forEach((c, i) => {
+    assert.deepEqual(c.filter, lines[i].filter);
+    assert.deepEqual(c.paint['line-opacity'], lines[i].paint['line-opacity']);
+    assert.equal(c.paint['line-color'], '#1b63c6');
+    assert.deepEqual(c.paint['line-width'], ['*', COMPARE_LINE_WIDTH, ['coalesce', ['get', 'morph_fade'], 1]]);
+  });
+  assert.notEqual(lines[0].paint['line-color'], '#1b63c6', 'the main layers are left as they were');
 });
