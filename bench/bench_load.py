@@ -346,8 +346,7 @@ def run_connections(base: str, port: int, tiles: list[tuple[int, int, int]], arg
     samples, client_cpu = load_pipe.recv()
     client.join()
     cpu1 = cpu_by_role(int(args.server_pid))
-    print(f"
-{args.connections} connections ({args.seconds:.0f} s, load client niceness {args.client_niceness})")
+    print(f"\n{args.connections} connections ({args.seconds:.0f} s, load client niceness {args.client_niceness})")
     print(f"  {'route':30s} {'n':>6s} {'req/s':>7s} {'p50 ms':>8s} {'p99 ms':>8s} {'max ms':>8s}  statuses")
     for label, (lat, codes) in sorted(summarize(samples).items()):
         text = " ".join(f"{k}:{v}" for k, v in sorted(codes.items()))
