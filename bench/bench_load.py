@@ -51,6 +51,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 WORK = REPO / "var" / "bench"
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "tests"))  # tests/app/helpers imports support.* as pytest does
 
 from tests.app.conftest import LiveServer  # noqa: E402
 from tests.app.helpers import tile_for  # noqa: E402
