@@ -67,17 +67,22 @@ async def _connection(
             writer.close()
 
 
-async def _run(host: str, port: int, tiles: list[tuple[int, int, int]], connections: int, seconds: float) -> list[Sample]:
+async def _run(
+    host: str, port: int, tiles: list[tuple[int, int, int]], connections: int, seconds: float
+) -> list[Sample]:
     out: list[Sample] = []
     end = time.monotonic() + seconds
-    await asyncio.gather(
-        *(_connection(host, port, tiles, end, random.Random(i), out) for i in range(connections))
-    )
+    await asyncio.gather(*(_connection(host, port, tiles, end, random.Random(i), out) for i in range(connections)))
     return out
 
 
 def run_client(
-    host: str, port: int, tiles: list[tuple[int, int, int]], connections: int, seconds: float, niceness: int,
+    host: str,
+    port: int,
+    tiles: list[tuple[int, int, int]],
+    connections: int,
+    seconds: float,
+    niceness: int,
     conn: Connection,
 ) -> None:
     """Process entry: keep ``connections`` connections busy for ``seconds``; send the samples and this

@@ -61,9 +61,7 @@ def limits_from_settings() -> ConnectionLimits:
     from app.settings import Settings
 
     settings = Settings()
-    return ConnectionLimits(
-        settings.header_timeout_s, settings.read_timeout_s, settings.max_connections_per_client
-    )
+    return ConnectionLimits(settings.header_timeout_s, settings.read_timeout_s, settings.max_connections_per_client)
 
 
 #: Open connections per client address in this process (refused ones not counted).
