@@ -88,6 +88,13 @@ async def refuse_connection(scope: Scope, receive: ASGIReceiveCallable, send: AS
     await send({"type": "http.response.body", "body": _REFUSAL_BODY, "more_body": False})
 
 
+def _cancelled(timer: asyncio.TimerHandle | None) -> asyncio.TimerHandle | None:
+    """Cancel ``timer`` if any; None, to store in its place."""
+    if timer is not None:
+        timer.cancel()
+    return None
+
+
 class LimitedHttpToolsProtocol(HttpToolsProtocol):
     """uvicorn's httptools protocol with a head timeout, a body read timeout and a per-client cap."""
 
@@ -149,9 +156,7 @@ class LimitedHttpToolsProtocol(HttpToolsProtocol):
             self._head_timer = self.loop.call_later(seconds, self._head_timed_out)
 
     def _cancel_head_timer(self) -> None:
-        if self._head_timer is not None:
-            self._head_timer.cancel()
-            self._head_timer = None
+        self._head_timer = _cancelled(self._head_timer)
 
     def _head_timed_out(self) -> None:
         self._head_timer = None
@@ -183,9 +188,7 @@ class LimitedHttpToolsProtocol(HttpToolsProtocol):
         super().on_message_complete()
 
     def _cancel_body_timer(self) -> None:
-        if self._body_timer is not None:
-            self._body_timer.cancel()
-            self._body_timer = None
+        self._body_timer = _cancelled(self._body_timer)
 
     def _body_check(self) -> None:
         self._body_timer = None
