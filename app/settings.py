@@ -143,6 +143,23 @@ class Settings(BaseSettings):
         False, description="Take the TileJSON base URL from X-Forwarded-Proto/-Host (behind a trusted proxy)."
     )
 
+    # -- connections (app/http/connection_limits.py; per server process) ---------------------------------
+    header_timeout_s: float = Field(
+        10.0,
+        gt=0,
+        description="Seconds a request head may take, from the connection opening (or, kept alive, from the "
+        "request's first byte); then the connection is closed.",
+    )
+    read_timeout_s: float = Field(
+        30.0, gt=0, description="Seconds a request body may send nothing; then the connection is closed."
+    )
+    max_connections_per_client: int = Field(
+        64,
+        ge=0,
+        description="Open connections per client address, per server process; one more is answered 503 with "
+        "Retry-After and closed (GET /healthz still answered). 0: no cap. Behind a proxy this counts the proxy.",
+    )
+
     # -- API ----------------------------------------------------------------------------------------------
     cors_origins: Annotated[list[str], NoDecode] = Field(
         default_factory=lambda: ["*"], description="Origins allowed by CORS, comma-separated ('*' = any)."

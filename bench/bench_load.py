@@ -19,8 +19,13 @@ The load clients run on the same two cores as the server. ``--client-niceness 5`
 render workers' niceness, as if the clients were on other machines (as in a deployment): then the server's
 event loop is not competing with its own load generator for a core. The /healthz probe runs at niceness 0.
 
+``--connections N`` (issue 28) runs another test instead: /healthz polled alone (the idle figure), then
+while N connections at once ask z12 tiles and ``/datasets`` (``bench/many_connections.py``, a process of its
+own at ``--client-niceness``); it prints their statuses and latencies, /healthz p50/p99/max in both, and the
+ratio (goal: max within 50 ms).
+
 Usage: python bench/bench_load.py [--seconds 30] [--clients 4] [--hostile 4] [--workers 1] [--token T]
-       [--client-niceness N]
+       [--client-niceness N] [--connections N]
 """
 
 from __future__ import annotations
@@ -46,6 +51,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 WORK = REPO / "var" / "bench"
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "tests"))  # tests/app/helpers imports support.* as pytest does
 
 from tests.app.conftest import LiveServer  # noqa: E402
 from tests.app.helpers import tile_for  # noqa: E402
@@ -312,6 +318,50 @@ def breakdown(title: str, rec: Record, label: str) -> None:
           f" + render {rows[tail, 2].mean():.1f} + rest {rest[tail].mean():.1f} ms")
 
 
+def run_connections(base: str, port: int, tiles: list[tuple[int, int, int]], args: argparse.Namespace) -> None:
+    """/healthz alone, then during ``--connections`` open connections (see the module docstring)."""
+    from bench.many_connections import run_client, summarize
+
+    spawn = multiprocessing.get_context("spawn")
+
+    def probe(seconds: float) -> tuple[Connection, multiprocessing.process.BaseProcess]:
+        mine, theirs = multiprocessing.Pipe()
+        proc = spawn.Process(target=health_probe, args=(base, seconds, theirs))
+        proc.start()
+        return mine, proc
+
+    idle_pipe, idle_proc = probe(min(args.seconds, 10.0))
+    idle = idle_pipe.recv()
+    idle_proc.join()
+    cpu0 = cpu_by_role(int(args.server_pid))
+    load_pipe, theirs = multiprocessing.Pipe()
+    client = spawn.Process(
+        target=run_client,
+        args=("127.0.0.1", port, tiles, args.connections, args.seconds, args.client_niceness, theirs),
+    )
+    client.start()
+    time.sleep(1.0)  # the connections open first
+    health_pipe, health_proc = probe(args.seconds - 2.0)
+    health = health_pipe.recv()
+    health_proc.join()
+    samples, client_cpu = load_pipe.recv()
+    client.join()
+    cpu1 = cpu_by_role(int(args.server_pid))
+    print(f"\n{args.connections} connections ({args.seconds:.0f} s, load client niceness {args.client_niceness})")
+    print(f"  {'route':30s} {'n':>6s} {'req/s':>7s} {'p50 ms':>8s} {'p99 ms':>8s} {'max ms':>8s}  statuses")
+    for label, (lat, codes) in sorted(summarize(samples).items()):
+        text = " ".join(f"{k}:{v}" for k, v in sorted(codes.items()))
+        print(f"  {label:30s} {len(lat):6d} {len(lat) / args.seconds:7.1f} {pct(lat, 50):8.1f} {pct(lat, 99):8.1f} "
+              f"{max(lat) * 1000:8.1f}  {text}")
+    report_cpu(cpu0, cpu1, args.seconds)
+    print(f"  load client process: {client_cpu / args.seconds:.2f} cores")
+    for title, values in (("alone", idle), (f"at {args.connections} connections", health)):
+        print(f"/healthz {title}: {len(values)} polls, p50 {pct(values, 50):.1f} ms, p99 {pct(values, 99):.1f} ms, "
+              f"max {max(values) * 1000:.1f} ms")
+    print(f"/healthz loaded / alone: p50 {pct(health, 50) / pct(idle, 50):.1f}x, "
+          f"max {max(health) / max(idle):.1f}x (goal: max <= 50 ms)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=30.0, help="length of each phase")
@@ -321,12 +371,18 @@ def main() -> None:
     parser.add_argument("--token", default=None, help="admin token: add uploads and deletes to the mix")
     parser.add_argument("--client-niceness", type=int, default=0,
                         help="niceness of the load clients' threads (5: as if they ran on other machines)")
+    parser.add_argument("--connections", type=int, default=0,
+                        help="instead: /healthz alone, then during this many open connections (z12 tiles, /datasets)")
     args = parser.parse_args()
     store = sample_store()
     server = start(store, args.workers, args.token)
     try:
         base = server.url
         tiles = z12_tiles(base)
+        if args.connections:
+            args.server_pid = server.proc.pid
+            run_connections(base, server.port, tiles, args)
+            return
         print(f"server {base}, {args.workers} uvicorn worker(s); {len(tiles)} z12 tiles with contours; "
               f"{args.clients} plain clients, {args.hostile} hostile clients (niceness {args.client_niceness}), "
               f"{os.cpu_count()} cores")

@@ -94,8 +94,18 @@ def serve(
         raise typer.Exit(2) from None
     _check_store_or_exit(settings.store_path)
     # The app is created from the environment in each worker (app.main:app), so 1 or N workers behave alike.
+    # The protocol (named by import path, so every worker imports it) adds the head and body timeouts and the
+    # per-client connection cap (app/http/connection_limits.py).
+    from app.http.connection_limits import HTTP_PROTOCOL
+
     uvicorn.run(
-        "app.main:app", host=host, port=port, workers=workers, log_level=log_level, proxy_headers=True
+        "app.main:app",
+        host=host,
+        port=port,
+        workers=workers,
+        log_level=log_level,
+        proxy_headers=True,
+        http=HTTP_PROTOCOL,
     )
 
 

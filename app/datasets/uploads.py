@@ -25,10 +25,10 @@ from pathlib import Path
 from typing import IO, Any
 
 from fastapi.concurrency import run_in_threadpool
-from starlette.requests import Request
+from starlette.requests import ClientDisconnect, Request
 
 from app.datasets.upload_check import CheckedUpload, UploadCheck, checker_main
-from app.errors import UploadCheckFailed, UploadQueueFull, UploadTooLarge
+from app.errors import ClientGone, UploadCheckFailed, UploadQueueFull, UploadTooLarge
 from app.settings import Settings
 from engine.errors import StoreUnwritable
 from engine.store.connection import unwritable_reason
@@ -90,15 +90,18 @@ async def _copy_body(request: Request, fh: IO[bytes], limit: int) -> None:
     size = 0
     buffer: list[bytes] = []
     buffered = 0
-    async for chunk in request.stream():
-        size += len(chunk)
-        if size > limit:
-            raise UploadTooLarge(f"upload exceeds the limit of {limit} bytes")
-        buffer.append(chunk)
-        buffered += len(chunk)
-        if buffered >= WRITE_BUFFER_BYTES:
-            await run_in_threadpool(fh.write, b"".join(buffer))
-            buffer, buffered = [], 0
+    try:
+        async for chunk in request.stream():
+            size += len(chunk)
+            if size > limit:
+                raise UploadTooLarge(f"upload exceeds the limit of {limit} bytes")
+            buffer.append(chunk)
+            buffered += len(chunk)
+            if buffered >= WRITE_BUFFER_BYTES:
+                await run_in_threadpool(fh.write, b"".join(buffer))
+                buffer, buffered = [], 0
+    except ClientDisconnect as exc:  # it hung up, or stalled past CCSM_READ_TIMEOUT_S: a 499, no traceback
+        raise ClientGone("the client stopped sending its upload") from exc
     if buffer:
         await run_in_threadpool(fh.write, b"".join(buffer))
 
