@@ -136,9 +136,11 @@ def check_contour(contour: Contour) -> None:
         raise InvalidContour(
             f"{where}: {len(xy)} vertices, a {'ring' if contour.closed else 'line'} needs {need}"
         )
-    if np.any(np.all(np.diff(closed_path(xy) if contour.closed else xy, axis=0) == 0, axis=1)):
+    # One difference of the path for both checks: every build checks its contour (twice, with the set's check).
+    steps = np.diff(closed_path(xy) if contour.closed else xy, axis=0)
+    if np.any(np.all(steps == 0, axis=1)):
         raise InvalidContour(f"{where}: repeated consecutive vertices")
-    if path_length(xy, contour.closed) <= 0:
+    if np.hypot(steps[:, 0], steps[:, 1]).sum() <= 0:  # path_length's sum
         raise InvalidContour(f"{where}: zero length")
 
 

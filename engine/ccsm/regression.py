@@ -95,11 +95,21 @@ class ScaleModel:
         f1 = exponential_model(np.array([self.target_scale / self.source_scale]), *model.coefficients)[0]
         return np.clip((f0 - f) / (f0 - f1), 0.0, 1.0)
 
+    def ladder_share(self, group: int) -> NDArray[np.float64]:
+        """:meth:`loss_share` at the ladder's scales, computed once per group (every contour of the group
+        asks for it; read-only: the array is shared)."""
+        cache: dict[int, NDArray[np.float64]] = self.__dict__.setdefault("_ladder_shares", {})
+        if group not in cache:
+            share = self.loss_share(group, self.ladder)
+            share.flags.writeable = False
+            cache[group] = share
+        return cache[group]
+
     def t_table(
         self, group: int, sim_t: NDArray[np.float64], sim: NDArray[np.float64]
     ) -> NDArray[np.float64]:
         """A contour's t at every scale of the ladder, from its Sim(t) table; non-decreasing, 0 ... 1."""
-        share = self.loss_share(group, self.ladder)
+        share = self.ladder_share(group)
         envelope = np.minimum.accumulate(sim)  # Sim as measured can wobble by sampling; t must not go back
         loss = envelope[0] - envelope
         if loss[-1] <= 1e-12:  # Ln is L0 within measurement: nothing to match, follow the share linearly

@@ -124,6 +124,8 @@ class SimilarityReference:
         return out
 
 
+# numba's cache keys a kernel on its own file only: it keeps the compiled discrete_frechet it was built with
+# until this file changes, so a change of that kernel comes with a touch here.
 @njit(cache=True)
 def _slice_similarities(samples, length, base, top, ts, out):  # pragma: no cover - compiled
     """``out[k]`` = 1 - dF(samples, slice(ts[k]) resampled to len(samples) points) / length.

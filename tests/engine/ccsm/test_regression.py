@@ -212,3 +212,11 @@ def test_fewer_contours_than_groups_gives_one_group_per_contour() -> None:
 def test_fit_scale_model_of_no_contours_is_the_log_mapping() -> None:
     model, labels = fit_scale_model([], BuildParams())
     assert model.groups == () and len(labels) == 0
+
+
+def test_each_group_keeps_its_own_ladder_share_when_groups_alternate() -> None:
+    # The share at the ladder is kept per group once computed: asked in turn, each group still gets its own.
+    model = log_model((exp_group(0.9, -0.01, 0.1, -0.4), exp_group(0.98, -0.2, 0.02, -0.01)))
+    flat = np.ones(5)  # a Sim table with no loss: the t table is the group's share itself
+    for group in (0, 1, 0, 1, 7):
+        assert_allclose(model.t_table(group, np.linspace(0, 1, 5), flat), model.loss_share(group, LADDER), atol=0)
