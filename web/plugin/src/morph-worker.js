@@ -10,6 +10,8 @@ import {decodeMorphTile, renderMorphTile} from './morphtile.js';
 
 /** Steps drawn ahead of the last one asked for, per tile. */
 const AHEAD = 2;
+/** Drawn-ahead tiles kept (a view of a dozen tiles, a few steps each). */
+const DRAWN_KEPT = 96;
 
 export class MorphRenderer {
   /**
@@ -84,7 +86,7 @@ export class MorphRenderer {
     const id = `${job.key}@${job.step}`;
     if (tile && !this.drawn.has(id)) {
       this.drawn.set(id, this._draw(tile, job.z, job.step, job.stepsPerZoom, job.options));
-      while (this.drawn.size > 4 * this.capacity) this.drawn.delete(this.drawn.keys().next().value);
+      while (this.drawn.size > DRAWN_KEPT) this.drawn.delete(this.drawn.keys().next().value);
     }
     // One job per task, so that requests that arrive meanwhile are answered first.
     this.schedule(() => this._runQueue());
