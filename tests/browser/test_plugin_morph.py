@@ -162,6 +162,8 @@ def test_static_pmtiles_without_the_service(browser, service_url, static_site, m
             page.wait_for_function("() => window.contours && window.contours.settled", timeout=20_000)
             drawn_by = page.evaluate("() => import('maplibre-gl').then((m) => m.getVersion())")
             assert drawn_by == static_site.maplibre_version
+            # The worker started under the page's import map (its modules import nothing by a bare name).
+            assert page.evaluate("() => morph.rendererMode()") == "worker"
             page.evaluate("(c) => map.jumpTo({center: c, zoom: 11})", CENTRE)
             page.wait_for_function("() => contours.settled && contours.shownZoom === 11", timeout=20_000)
             ranges_before = len(static_site.requests_for(".pmtiles"))

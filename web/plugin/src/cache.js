@@ -35,6 +35,11 @@ export class PromiseCache {
     return this.entries.has(key);
   }
 
+  /** Forget `key` (its next get loads it again). */
+  delete(key) {
+    this.entries.delete(key);
+  }
+
   clear() {
     this.entries.clear();
   }

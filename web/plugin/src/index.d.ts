@@ -69,6 +69,8 @@ export interface CcsmMorphSettings {
   protocol?: string;
   /** The fetch used for the TileJSON and the tiles (default: the global fetch). */
   fetch?: typeof fetch;
+  /** Decode and draw tiles in a module worker (default true; false, or no Worker: in the page's thread). */
+  worker?: boolean;
 }
 
 export type CcsmMorphOptions = MorphSourceOptions & CcsmMorphSettings;
@@ -227,6 +229,8 @@ export class CcsmMorph {
   tileUrl(step: number): string;
   /** The decoded morph tile z/x/y: fetched once, then from memory. */
   morphTile(z: number, x: number, y: number): Promise<DecodedMorphTile>;
+  /** Where tiles are decoded and drawn: 'worker' (a module worker) or 'local' (the page's thread). */
+  rendererMode(): Promise<'worker' | 'local'>;
   /** Draw the morphing contours on `map` with the given style layers; may be called before the style loads. */
   addTo(map: MaplibreMap, options: AddToOptions): MorphLayer;
 }

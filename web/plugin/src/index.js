@@ -1,7 +1,7 @@
 // ccsm-morph: continuously morphing ccsm contours in any MapLibre GL JS map.
 //
 // A CcsmMorph reads morph tiles (docs/morph-tiles.md) from a tile server or a PMTiles archive, fetches each
-// tile once, keeps it decoded, and serves MapLibre, through a protocol of its own, the layer `contours` as
+// tile once, keeps it decoded in a worker (morph-worker.js; in the page where there is none), and serves MapLibre, through a protocol of its own, the layer `contours` as
 // drawn at any step of the zoom (stepsPerZoom steps per level), encoded as a vector tile in memory.
 // addTo(map, {layers}) draws it with the caller's style layers, double-buffered (layer.js).
 //
@@ -10,7 +10,7 @@
 import {PromiseCache} from './cache.js';
 import {pmtilesFetcher, templateFetcher} from './fetchers.js';
 import {MorphLayer} from './layer.js';
-import {decodeMorphTile, renderMorphTile} from './morphtile.js';
+import {createRenderer} from './morph-worker.js';
 
 export {MorphLayer} from './layer.js';
 export {decodeMorphTile, interpolateFeatures, renderMorphTile} from './morphtile.js';
@@ -23,6 +23,7 @@ const DEFAULTS = {
   cacheSize: 192,
   scale: 2,
   keepSamples: false,
+  worker: true,
 };
 
 function randomSuffix() {
@@ -47,6 +48,7 @@ export class CcsmMorph {
    * @param {boolean} [options.keepSamples=false]  keep the properties t1 ... t8 in the drawn tiles
    * @param {string} [options.protocol]  the protocol name registered with MapLibre (unique per instance)
    * @param {typeof fetch} [options.fetch]  the fetch to use for tiles and TileJSON
+   * @param {boolean} [options.worker=true]  decode and draw tiles in a Web Worker (false: in the page)
    */
   constructor(options = {}) {
     this.options = {...DEFAULTS, ...options};
@@ -85,11 +87,16 @@ export class CcsmMorph {
       throw new Error('ccsm-morph: give `url` (TileJSON or pmtiles://...) or `tiles`');
     }
     this._metadata.catch(() => {});
+    this._renderer = createRenderer({capacity: this.options.cacheSize, useWorker: this.options.worker});
+    // Each entry: the tile is fetched and handed to the renderer, which keeps it decoded; {empty}.
     this._tiles = new PromiseCache(this.options.cacheSize, async (key) => {
       const [z, x, y] = key.split('/').map(Number);
       this.fetchCount += 1;
-      return decodeMorphTile(await fetchTile(z, x, y));
+      const bytes = await fetchTile(z, x, y);
+      return (await this._renderer).add(key, bytes);
     });
+    this._lastStep = null;
+    this._direction = 1;
     // A bound function: MapLibre calls it without `this`.
     this.loadTile = (params) => this._loadTile(params);
   }
@@ -128,23 +135,45 @@ export class CcsmMorph {
   }
 
   /** The decoded morph tile z/x/y: fetched once, then from memory. */
-  morphTile(z, x, y) {
-    return this._tiles.get(`${z}/${x}/${y}`);
+  async morphTile(z, x, y) {
+    const key = `${z}/${x}/${y}`;
+    const renderer = await this._renderer;
+    await this._tiles.get(key);
+    const tile = await renderer.get(key);
+    if (tile) return tile;
+    this._tiles.delete(key); // the renderer let it go first: fetch it again
+    await this._tiles.get(key);
+    return renderer.get(key);
+  }
+
+  /** Where tiles are decoded and drawn: 'worker' or 'local' (the page's thread). */
+  async rendererMode() {
+    return (await this._renderer).mode;
   }
 
   async _loadTile(params) {
     const m = /^[^:]+:\/\/step(\d+)\/(\d+)\/(\d+)\/(\d+)/.exec(params.url);
     if (!m) throw new Error(`ccsm-morph: bad tile URL ${params.url}`);
     const [step, z, x, y] = m.slice(1).map(Number);
-    const tile = await this.morphTile(z, x, y);
-    if (!tile.features.length) return {data: new ArrayBuffer(0)};
+    if (this._lastStep !== null && step !== this._lastStep) this._direction = step > this._lastStep ? 1 : -1;
+    this._lastStep = step;
+    const key = `${z}/${x}/${y}`;
     const o = this.options;
-    const bytes = renderMorphTile(tile, z, step / this.stepsPerZoom, {
-      scale: o.scale,
-      fadeSpan: o.fadeSpan,
-      keepSamples: o.keepSamples,
-    });
-    return {data: bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.byteLength)};
+    const request = {
+      z,
+      step,
+      stepsPerZoom: this.stepsPerZoom,
+      direction: this._direction,
+      options: {scale: o.scale, fadeSpan: o.fadeSpan, keepSamples: o.keepSamples},
+    };
+    const renderer = await this._renderer;
+    for (let attempt = 0; attempt < 2; attempt++) {
+      if ((await this._tiles.get(key)).empty) return {data: new ArrayBuffer(0)};
+      const data = await renderer.render(key, request);
+      if (data) return {data};
+      this._tiles.delete(key); // the renderer let it go first: fetch it again
+    }
+    throw new Error(`ccsm-morph: tile ${key} was dropped while drawing it`);
   }
 
   /**

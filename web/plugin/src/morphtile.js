@@ -1,8 +1,7 @@
 // Morph tiles (docs/morph-tiles.md): decode one tile once into flat arrays, then give the layer `contours`
 // as drawn at any zoom inside its level, as features for the MVT encoder. Pure functions, no state.
 
-import {VectorTile} from '@mapbox/vector-tile';
-import {PbfReader} from 'pbf';
+import {readVectorTile} from './protobuf.js';
 import {fadeAt, levelFraction, morphWeight, tAt, tSamples} from './tinterp.js';
 import {encodeMvt, GEOM_LINESTRING} from './mvt.js';
 
@@ -44,7 +43,7 @@ function sameShape(a, b) {
 export function decodeMorphTile(bytes) {
   const data = bytes instanceof Uint8Array ? bytes : new Uint8Array(bytes ?? new ArrayBuffer(0));
   if (!data.byteLength) return {extent: 4096, features: [], mismatched: 0};
-  const vt = new VectorTile(new PbfReader(data));
+  const vt = readVectorTile(data);
   const start = vt.layers[START_LAYER];
   if (!start) return {extent: 4096, features: [], mismatched: 0};
   const endLayer = vt.layers[END_LAYER];

@@ -1,5 +1,5 @@
 // A small Mapbox Vector Tile (spec 2.1) encoder: what the plugin needs to hand MapLibre one interpolated tile.
-// The protobuf wire format is written with pbf's PbfWriter; the MVT messages are laid out here.
+// The protobuf wire format is written with protobuf.js's ProtoWriter; the MVT messages are laid out here.
 //
 // Input: layers [{name, extent, features}], each feature {id?, type, parts, properties}:
 //   type 1 (POINT), 2 (LINESTRING) or 3 (POLYGON);
@@ -10,7 +10,7 @@
 // Line parts that shrink below two distinct points after rounding are dropped, and so is a feature left
 // without parts.
 
-import {PbfWriter} from 'pbf';
+import {ProtoWriter} from './protobuf.js';
 
 export const GEOM_POINT = 1;
 export const GEOM_LINESTRING = 2;
@@ -150,7 +150,7 @@ function prepareLayer({name, extent = 4096, features}) {
  * @returns {Uint8Array}
  */
 export function encodeMvt(layers) {
-  const pbf = new PbfWriter();
+  const pbf = new ProtoWriter();
   for (const layer of layers) pbf.writeMessage(3, writeLayer, prepareLayer(layer));
   return pbf.finish();
 }

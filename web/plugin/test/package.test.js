@@ -38,6 +38,7 @@ test('the tarball holds src/ (modules and declarations), the manifest and the RE
   const shipped = packed.files.map((f) => f.path).sort();
   const sources = readdirSync(join(PLUGIN, 'src')).map((name) => `src/${name}`);
   assert.deepEqual(shipped, ['README.md', 'package.json', ...sources].sort());
+  assert.ok(shipped.includes('src/morph-worker.js'), 'the worker ships beside index.js (new URL resolves it)');
   assert.ok(shipped.includes(manifest.types), manifest.types);
   assert.ok(shipped.includes(manifest.exports['.'].types.replace(/^\.\//, '')));
   assert.ok(!shipped.some((p) => p.startsWith('test/') || p.startsWith('example/')));
