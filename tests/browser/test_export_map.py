@@ -127,6 +127,7 @@ def test_exported_folder_draws_the_services_map_without_the_service(
     app: Any, browser: Any, service_url: str, static_map: RangeServer, exported_map: Path
 ) -> None:
     app.open()
+    app.wait_settled()  # the status bar below the map takes its height once the dataset's legend is written
     size = app.page.evaluate("() => ({width: ccsm.maps.a.getCanvas().width, height: ccsm.maps.a.getCanvas().height})")
     assert app.page.evaluate("() => window.devicePixelRatio") == 1
     expected = service_views(app, size)
