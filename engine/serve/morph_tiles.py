@@ -20,7 +20,7 @@ from engine.serve.tile_request import TileOptions, TileResult, tile_latitude
 from engine.tiles.grid import buffered, check_tile, tile_bounds
 from engine.tiles.morph_untangle import MorphParts, morph_weights, untangle
 from engine.tiles.mvt import encode_line_tile
-from engine.tiles.runs import morph_runs
+from engine.tiles.runs import RunSet, morph_runs
 from engine.tiles.scale import scale_for_zoom, zoom_for_scale
 from engine.types import Bounds
 
@@ -90,15 +90,10 @@ class MorphTiles:
             return TileResult(None, 0, float(z), float(scales[0]))
         a, b, run_owner = runs
         q0, q1, part_len, part_run = morph_runs(
-            a,
-            b,
+            RunSet(a, b, drawn.column[run_owner], drawn.refill[run_owner]),
             ts[0][run_owner],
             ts[-1][run_owner],
-            drawn.column[run_owner],
-            drawn.refill[run_owner],
-            pack.ccs.sig,
-            pack.ccs.base,
-            pack.ccs.top,
+            pack.ccs,
             self.cutter.min_significance(box),
             bounds,
             opts.extent,
