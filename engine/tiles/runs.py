@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 from numba import njit
@@ -124,7 +124,7 @@ def _quantised_at(base, top, i, t, x0, y0, k):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def _slice_runs_kernel(
-    a, b, run_t, col, refill, sig, base, top, min_sig, x0, y0, k, out, plen, box
+    a, b, col, refill, run_t, sig, base, top, min_sig, x0, y0, k, out, plen, box
 ):  # pragma: no cover - compiled
     n = 0
     for r in range(len(a)):
@@ -198,23 +198,28 @@ class RunSet:
         """Rows of each run."""
         return np.asarray(self.b - self.a, dtype=np.int64)
 
-    def kernel_args(self, ts: list[NDArray[np.float64]]) -> tuple[NDArray[Any], ...]:
-        """The runs and their t (one array, or the two ends of a level) as the run kernels take them first, in
-        the dtypes they are compiled for."""
+    def kernel_args(self) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_]]:
+        """The runs as the run kernels take them first, in the dtypes they are compiled for."""
         return (
             np.ascontiguousarray(self.a, dtype=np.int64),
             np.ascontiguousarray(self.b, dtype=np.int64),
-            *(np.ascontiguousarray(t, dtype=np.float64) for t in ts),
             np.ascontiguousarray(self.col, dtype=np.int64),
             np.ascontiguousarray(self.refill, dtype=np.bool_),
         )
 
 
-def _rows_args(rows: RowSource, min_sig: float, bounds: Bounds, extent: int) -> tuple[Any, ...]:
+def _rows_args(
+    rows: RowSource, min_sig: float, bounds: Bounds, extent: int
+) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float64], float, float, float, float]:
     """The rows, the significance threshold and the grid (origin x, origin y, units per metre) as the run
-    kernels take them, after the runs."""
+    kernels take them, after the runs' t."""
     k = extent / (bounds.maxx - bounds.minx)
     return rows.sig, rows.base, rows.top, float(min_sig), float(bounds.minx), float(bounds.maxy), float(k)
+
+
+def _float64(t: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A t array as the run kernels are compiled for it."""
+    return np.ascontiguousarray(t, dtype=np.float64)
 
 
 def slice_runs(
@@ -243,7 +248,9 @@ def slice_runs(
     out = np.empty((max(total, 1), 2), dtype=np.int64)
     plen = np.empty(len(runs.a), dtype=np.int64)
     box = np.empty((len(runs.a), 4), dtype=np.int64)
-    n = _slice_runs_kernel(*runs.kernel_args([run_t]), *_rows_args(rows, min_sig, bounds, extent), out, plen, box)
+    n = _slice_runs_kernel(
+        *runs.kernel_args(), _float64(run_t), *_rows_args(rows, min_sig, bounds, extent), out, plen, box
+    )
     return out[:n], plen, box
 
 
@@ -284,7 +291,7 @@ def _segment_reaches(s0, s1, j, lo, hi):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def _morph_runs_kernel(
-    a, b, t0, t1, col, refill, sig, base, top, min_sig, x0, y0, k, lo, hi, q0, q1, plen, prun, s0, s1
+    a, b, col, refill, t0, t1, sig, base, top, min_sig, x0, y0, k, lo, hi, q0, q1, plen, prun, s0, s1
 ):  # noqa: C901  # pragma: no cover - compiled, one loop nest
     n = 0
     p = 0
@@ -366,7 +373,9 @@ def morph_runs(
     s0 = np.empty((max(longest, 1), 2), dtype=np.int64)
     s1 = np.empty_like(s0)
     n, p = _morph_runs_kernel(
-        *runs.kernel_args([t_start, t_end]),
+        *runs.kernel_args(),
+        _float64(t_start),
+        _float64(t_end),
         *_rows_args(rows, min_sig, bounds, extent),
         -buffer_px,
         extent + buffer_px,
