@@ -16,13 +16,9 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
-import socket
 import statistics
-import subprocess
 import sys
 import tempfile
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -31,9 +27,12 @@ from typing import Any
 import httpx
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests" / "browser"))
 
 from chromium_launch import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
+
+from tests.app.conftest import LiveServer  # noqa: E402
 
 VIEWPORT = {"width": 640, "height": 480}
 START, END, EASE_MS = 11.0, 11.97, 8000
@@ -45,39 +44,13 @@ def service(base_url: str | None) -> Iterator[str]:
         yield base_url.rstrip("/")
         return
     with tempfile.TemporaryDirectory() as tmp:
-        port = free_port()
-        env = {**os.environ, "CCSM_STORE_PATH": str(Path(tmp) / "store.ccsm.sqlite")}
-        log = open(Path(tmp) / "service.log", "wb")  # noqa: SIM115
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "uvicorn", "app.main:app", "--host", "127.0.0.1", "--port", str(port)],
-            cwd=REPO,
-            env=env,
-            stdout=log,
-            stderr=subprocess.STDOUT,
-        )
-        url = f"http://127.0.0.1:{port}"
+        server = LiveServer({"CCSM_STORE_PATH": str(Path(tmp) / "store.ccsm.sqlite")}, log=Path(tmp) / "service.log")
         try:
-            deadline = time.monotonic() + 300
-            while time.monotonic() < deadline:
-                if proc.poll() is not None:
-                    raise SystemExit(f"the service exited: see {log.name}")
-                try:
-                    if any(d.get("state") == "ready" for d in httpx.get(f"{url}/datasets", timeout=2).json()):
-                        break
-                except httpx.HTTPError:
-                    pass
-                time.sleep(0.5)
-            yield url
+            server.wait_healthy(300)
+            server.wait_ready("sample", 300)  # a fresh store: the service builds the bundled sample first
+            yield server.url
         finally:
-            proc.terminate()
-            proc.wait(timeout=10)
-            log.close()
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+            server.stop()
 
 
 def tiles_in_view(page: Any, z: int) -> int:

@@ -37,6 +37,7 @@ from engine.serve.renderer import Renderer  # noqa: E402
 from engine.store.store import CCSStore  # noqa: E402
 from engine.tiles.grid import tiles_covering  # noqa: E402
 from engine.types import Bounds, Contour  # noqa: E402
+from tests.app.conftest import LiveServer  # noqa: E402
 
 WORK = REPO / "var" / "bench"
 
@@ -75,40 +76,13 @@ def pct(values: list[float]) -> str:
     return f"p50 {np.percentile(a, 50):6.2f} ms  p95 {np.percentile(a, 95):6.2f} ms  max {a.max():7.2f} ms"
 
 
-class Server:
-    def __init__(self, store: Path, workers: int, port: int) -> None:
-        env = {
-            **os.environ,
-            "CCSM_STORE_PATH": str(store),
-            "CCSM_SERVE_SAMPLE": "false",
-            "CCSM_BUILD_ON_START": "false",
-        }
-        self.url = f"http://127.0.0.1:{port}"
-        self.proc = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "uvicorn",
-                "app.main:app",
-                "--port",
-                str(port),
-                "--workers",
-                str(workers),
-                "--log-level",
-                "warning",
-                "--no-access-log",
-            ],
-            env=env,
-            cwd=REPO,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-        )
-        for _ in range(300):
-            try:
-                if httpx.get(self.url + "/healthz", timeout=1).status_code == 200:
-                    break
-            except httpx.HTTPError:
-                time.sleep(0.1)
+class Server(LiveServer):
+    """The service on ``store`` with ``workers`` uvicorn workers (no sample, no builds), answering."""
+
+    def __init__(self, store: Path, workers: int) -> None:
+        env = {"CCSM_STORE_PATH": str(store), "CCSM_SERVE_SAMPLE": "false", "CCSM_BUILD_ON_START": "false"}
+        super().__init__(env, args=["--workers", str(workers)])
+        self.wait_healthy()
         time.sleep(0.5 * workers)
 
     def rss_mb(self) -> float:
@@ -127,10 +101,6 @@ class Server:
             except OSError:
                 pass
         return total / 1024
-
-    def stop(self) -> None:
-        self.proc.terminate()
-        self.proc.wait(20)
 
 
 async def throughput(url: str, paths: list[str], concurrency: int = 8, headers: dict | None = None) -> float:
@@ -160,7 +130,7 @@ def main() -> None:
     tiles = pyramid(info.bounds_3857, zooms)
     paths = [f"/tiles/sample/{z}/{x}/{y}.mvt" for z, x, y in tiles]
     print(f"\n== uncached tile latency over HTTP, 1 worker, z{zooms.start}-z{zooms.stop - 1} ({len(tiles)} tiles) ==")
-    srv = Server(one, 1, 18731)
+    srv = Server(one, 1)
     try:
         with httpx.Client(base_url=srv.url, timeout=60) as c:
             for p in paths:  # warm the per-process contour cache once (disk -> memory), as a running server is
@@ -184,7 +154,7 @@ def main() -> None:
         mem1 = srv.rss_mb()
     finally:
         srv.stop()
-    srv2 = Server(one, 2, 18732)
+    srv2 = Server(one, 2)
     try:
         asyncio.run(throughput(srv2.url, paths))  # warm both workers
         rps2 = asyncio.run(throughput(srv2.url, paths * 2))

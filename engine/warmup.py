@@ -60,7 +60,7 @@ def _check_tile_topology() -> None:
     snap rounding and the morph check, on two lines that cross."""
     from engine.tiles.clip import clip_lines_exact
     from engine.tiles.crossings import crossing_owner_pairs
-    from engine.tiles.morph_crossings import morph_crossing_pairs
+    from engine.tiles.morph_crossings import MorphParts, morph_crossing_pairs
     from engine.tiles.snap_round import snap_round
 
     start = np.array([[0, 0], [10, 0], [4, 1], [6, 1]], dtype=np.int64)
@@ -69,7 +69,7 @@ def _check_tile_topology() -> None:
     crossing_owner_pairs(end, part_len, owner)
     clip_lines_exact(end.astype(np.float64), part_len, 1.0, 9.0)  # exact lines cut before snap rounding
     snap_round(end.astype(np.float64), part_len)
-    morph_crossing_pairs(start, end, part_len, owner, np.array([[0.0, 0.0], [0.0, 0.5], [0.0, 1.0]]))
+    morph_crossing_pairs(MorphParts(start, end, part_len, owner), np.array([[0.0, 0.0], [0.0, 0.5], [0.0, 1.0]]))
 
 
 def _render_one_tile(ring: np.ndarray, line: np.ndarray) -> None:

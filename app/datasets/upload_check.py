@@ -32,22 +32,16 @@ BAD_FEATURES_SHOWN = 20
 
 @dataclass(frozen=True)
 class UploadCheck:
-    """One upload to check: the file it was streamed to and how to read it.
-
-    Attributes
-    ----------
-    hash_params
-        The build parameters that go into the upload's content hash (``UploadParams.as_dict()``).
-    max_contour_vertices
-        The most vertices one contour may have (``CCSM_MAX_CONTOUR_VERTICES``); None = no limit.
-    """
+    """One upload to check: the file it was streamed to and how to read it."""
 
     path: Path
     elevation_field: str | None
     interval: float | None
+    #: The build parameters that go into the upload's content hash (``UploadParams.as_dict()``).
     hash_params: dict[str, Any]
     cartography: CartographyOptions | None = None
     source_scale: float | None = None
+    #: The most vertices one contour may have (``CCSM_MAX_CONTOUR_VERTICES``); None = no limit.
     max_contour_vertices: int | None = None
 
 

@@ -667,6 +667,13 @@ def _measure_all(
 
 
 @njit(cache=True)
+def _links_and_index(cur: np.ndarray, closed: bool):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """The next-vertex links of a line not yet changed and the segment grid over it (:func:`build_index`)."""
+    _, nxt = init_links(cur.shape[0], closed)
+    return nxt, build_index(cur, nxt)
+
+
+@njit(cache=True)
 def _try_eliminate(  # type: ignore[no-untyped-def]
     xy: np.ndarray,
     closed: bool,
@@ -714,6 +721,35 @@ def _block(blocked: np.ndarray, k: int, closed: bool) -> None:  # pragma: no cov
 
 
 @njit(cache=True)
+def _eliminate_smallest(
+    cur: np.ndarray,
+    closed: bool,
+    dead: np.ndarray,
+    start: np.ndarray,
+    length: np.ndarray,
+    adj: np.ndarray,
+    allowed: np.ndarray,
+    budget: int,
+) -> int:  # pragma: no cover - compiled
+    """Replace up to ``budget`` of the ``allowed`` bends by their baselines, smallest adjusted size first (equal
+    sizes in line order), never two neighbours in one round. Returns how many were replaced."""
+    nxt, index = _links_and_index(cur, closed)
+    blocked = np.zeros(start.shape[0], np.bool_)
+    alive = cur.shape[0]
+    done = 0
+    for k in np.argsort(adj, kind="mergesort"):
+        if done >= budget:
+            break
+        if not allowed[k] or blocked[k]:
+            continue
+        if _try_eliminate(cur, closed, nxt, dead, index, alive, start[k], length[k]):
+            alive -= length[k]
+            _block(blocked, k, closed)
+            done += 1
+    return done
+
+
+@njit(cache=True)
 def wm_ladder_removal(
     xy: np.ndarray, closed: bool, gentle_rad: float, targets: np.ndarray
 ) -> np.ndarray:  # pragma: no cover - compiled
@@ -756,23 +792,9 @@ def wm_ladder_removal(
             if nb <= target:
                 break
             adj, _, _, _ = _measure_all(cur, closed, start, length, ang)
-            order = np.argsort(adj, kind="mergesort")  # stable: equal sizes go in line order
             budget = max(1, (nb - target) // 2)
-            _, nxt = init_links(m, closed)
-            index = build_index(cur, nxt)
             dead = np.zeros(m, np.bool_)
-            blocked = np.zeros(nb, np.bool_)
-            alive = m
-            done = 0
-            for k in order:
-                if done >= budget:
-                    break
-                if blocked[k]:
-                    continue
-                if _try_eliminate(cur, closed, nxt, dead, index, alive, start[k], length[k]):
-                    alive -= length[k]
-                    _block(blocked, k, closed)
-                    done += 1
+            done = _eliminate_smallest(cur, closed, dead, start, length, adj, np.ones(nb, np.bool_), budget)
             if done == 0:
                 return removed_at  # stuck: no bend can go without a crossing
             for v in range(m):
@@ -834,8 +856,7 @@ def _exaggerate(
     nb = start.shape[0]
     if nb < 3:
         return False
-    _, nxt = init_links(m, closed)
-    index = build_index(cur, nxt)
+    nxt, index = _links_and_index(cur, closed)
     dead = np.zeros(m, np.bool_)
     blocked = np.zeros(nb, np.bool_)
     changed = False
@@ -903,11 +924,9 @@ def _combine(
     the wiggly stretch becomes one bend instead of vanishing under elimination. Runs do not wrap around a
     ring's seam.
     """
-    m = cur.shape[0]
     nb = start.shape[0]
-    _, nxt = init_links(m, closed)
-    index = build_index(cur, nxt)
-    alive = m
+    nxt, index = _links_and_index(cur, closed)
+    alive = cur.shape[0]
     changed = False
     k = 0
     while k < nb:
@@ -927,34 +946,6 @@ def _combine(
                     alive -= length[j]
                     changed = True
         k = e + 1
-    return changed
-
-
-@njit(cache=True)
-def _eliminate_small(
-    cur: np.ndarray,
-    closed: bool,
-    dead: np.ndarray,
-    start: np.ndarray,
-    length: np.ndarray,
-    adj: np.ndarray,
-    small: np.ndarray,
-) -> bool:  # pragma: no cover - compiled
-    """Replace small bends by their baselines, smallest first, never two neighbours in one round."""
-    m = cur.shape[0]
-    nb = start.shape[0]
-    _, nxt = init_links(m, closed)
-    index = build_index(cur, nxt)
-    blocked = np.zeros(nb, np.bool_)
-    alive = m
-    changed = False
-    for k in np.argsort(adj, kind="mergesort"):
-        if not small[k] or blocked[k]:
-            continue
-        if _try_eliminate(cur, closed, nxt, dead, index, alive, start[k], length[k]):
-            alive -= length[k]
-            _block(blocked, k, closed)
-            changed = True
     return changed
 
 
@@ -998,7 +989,7 @@ def wm_generalize(
             continue
         dead = np.zeros(cur.shape[0], np.bool_)
         if not _combine(cur, closed, dead, start, length, adj, cmp, small, size_ratio, cmp_diff):
-            if not _eliminate_small(cur, closed, dead, start, length, adj, small):
+            if _eliminate_smallest(cur, closed, dead, start, length, adj, small, nb) == 0:
                 break
         keep = ~dead
         cur = cur[keep]

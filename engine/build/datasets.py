@@ -69,41 +69,29 @@ RELIEF_DEM_KEY = "relief_dem"
 
 @dataclass(frozen=True)
 class SourceSpec:
-    """A source to build into the store and how to read it.
+    """A source to build into the store and how to read it."""
 
-    Attributes
-    ----------
-    path
-        Contour file or DEM (anything :func:`engine.io.source.read_source` reads): a path, or a raster URL
-        or tile pyramid as :func:`engine.io.source.parse_source` gives them.
-    dataset
-        Dataset id in the store (``[a-z0-9_-]``).
-    name
-        Human name.
-    elevation_field, interval
-        Passed to ``read_source`` (a DEM needs ``interval``).
-    block
-        A DEM's window side in cells (see :func:`engine.io.dem.contours_from_dem`); None = chosen by size.
-    source_scale, target_scale
-        Scale denominators of t = 0 and t = 1.
-    cartography
-        Units, index contours, attribute names and schedule override (docs/design.md section 9); None for the
-        defaults (units then as the source states them, else metres).
-    relief_dem
-        A DEM to shade under the contours (docs/clients.md): the source itself when it is a DEM, or the DEM
-        contours were traced from (the bundled sample's). Stored with the dataset as a path; not part of the
-        content hash, since it changes no contour.
-    """
-
+    #: Contour file or DEM (anything :func:`engine.io.source.read_source` reads): a path, or a raster URL or tile
+    #: pyramid as :func:`engine.io.source.parse_source` gives them.
     path: Source
+    #: Dataset id in the store (``[a-z0-9_-]``).
     dataset: str
+    #: Human name.
     name: str
+    #: elevation_field, interval: passed to ``read_source`` (a DEM needs ``interval``).
     elevation_field: str | None = None
     interval: float | None = None
+    #: source_scale, target_scale: scale denominators of t = 0 and t = 1.
     source_scale: float = 50_000.0
     target_scale: float = 500_000.0
+    #: A DEM's window side in cells (see :func:`engine.io.dem.contours_from_dem`); None = chosen by size.
     block: int | None = None
+    #: Units, index contours, attribute names and schedule override (docs/design.md section 9); None for the defaults
+    #: (units then as the source states them, else metres).
     cartography: CartographyOptions | None = None
+    #: A DEM to shade under the contours (docs/clients.md): the source itself when it is a DEM, or the DEM contours were
+    #: traced from (the bundled sample's). Stored with the dataset as a path; not part of the content hash, since it
+    #: changes no contour.
     relief_dem: Path | None = None
 
     def relief_path(self) -> Path | None:

@@ -50,25 +50,18 @@ BUILD_NICENESS = 10
 
 @dataclass(frozen=True)
 class BuildJob:
-    """What one build process does.
+    """What one build process does."""
 
-    Attributes
-    ----------
-    kind
-        ``upload`` (a GeoJSON file written by the service, removed after the build) or ``source`` (a
-        configured source, built under the store's build lock unless current).
-    params
-        ``elevation_field``, ``interval``, ``source_scale``, ``target_scale``.
-    digest
-        Content hash recorded with an upload (a source's is computed from its file).
-    """
-
+    #: ``upload`` (a GeoJSON file written by the service, removed after the build) or ``source`` (a configured source,
+    #: built under the store's build lock unless current).
     kind: str
     store_path: str
     dataset: str
     source_path: str
     name: str
+    #: ``elevation_field``, ``interval``, ``source_scale``, ``target_scale``.
     params: dict[str, Any] = field(default_factory=dict)
+    #: Content hash recorded with an upload (a source's is computed from its file).
     digest: str = ""
     workers: int | None = 1
 

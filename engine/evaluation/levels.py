@@ -37,24 +37,16 @@ EVAL_METHODS: tuple[str, ...] = COMPARED_METHODS
 
 @dataclass(frozen=True)
 class VertexLadder:
-    """A baseline's levels as a rank per input vertex.
+    """A baseline's levels as a rank per input vertex."""
 
-    Attributes
-    ----------
-    coords
-        (n, 2) the input contour (a ring without its repeated vertex), rotated so that ``coords[0]`` is kept by
-        every level.
-    rank
-        (n,) int: the last level that keeps each vertex (``levels - 1`` for vertices kept throughout).
-    closed
-        Whether the contour is a ring.
-    levels
-        Number of levels.
-    """
-
+    #: (n, 2) the input contour (a ring without its repeated vertex), rotated so that ``coords[0]`` is kept by every
+    #: level.
     coords: Coords
+    #: (n,) int: the last level that keeps each vertex (``levels - 1`` for vertices kept throughout).
     rank: NDArray[np.int32]
+    #: Whether the contour is a ring.
     closed: bool
+    #: Number of levels.
     levels: int
 
     def at(self, i: int) -> Coords:
@@ -69,21 +61,14 @@ class VertexLadder:
 
 @dataclass(frozen=True)
 class SurfaceLadder:
-    """CCSM's levels: slices of a CCS at evenly spaced t (the paper's 100 horizontal planes).
+    """CCSM's levels: slices of a CCS at evenly spaced t (the paper's 100 horizontal planes)."""
 
-    Attributes
-    ----------
-    base, top
-        (M, 2) the CCS's rows at t = 0 and t = 1 (a ring as a closed path).
-    t
-        (levels,) t of each level, 0 ... 1.
-    closed
-        Whether the contour is a ring.
-    """
-
+    #: base, top: (M, 2) the CCS's rows at t = 0 and t = 1 (a ring as a closed path).
     base: Coords
     top: Coords
+    #: (levels,) t of each level, 0 ... 1.
     t: NDArray[np.float64]
+    #: Whether the contour is a ring.
     closed: bool
 
     @property

@@ -55,23 +55,15 @@ PAPER_METHODS: tuple[str, ...] = ("ccsm", "dp", "wm")
 
 @dataclass
 class ContourResult:
-    """One contour's ladders and similarity curves.
+    """One contour's ladders and similarity curves."""
 
-    Attributes
-    ----------
-    index
-        Position of the contour in the evaluated list.
-    contour
-        The contour.
-    ladders
-        Method -> ladder.
-    sims
-        (len(EVAL_METHODS), levels) Sim(L0, level i) per method, rows in ``EVAL_METHODS`` order.
-    """
-
+    #: Position of the contour in the evaluated list.
     index: int
+    #: The contour.
     contour: Contour
+    #: Method -> ladder.
     ladders: dict[str, Ladder]
+    #: (len(EVAL_METHODS), levels) Sim(L0, level i) per method, rows in ``EVAL_METHODS`` order.
     sims: NDArray[np.float64]
 
 
@@ -141,41 +133,28 @@ def _count_crossings(
 
 @dataclass
 class SameScaleContour:
-    """The same-scale comparison of one contour (paper Table 2, Fig. 11, Table 3).
+    """The same-scale comparison of one contour (paper Table 2, Fig. 11, Table 3)."""
 
-    Attributes
-    ----------
-    contour_id
-        Input id.
-    groups
-        (g, 4) level index per method (EVAL_METHODS order); columns ccsm, dp, wm from the paper's grouping,
-        vw the VW level nearest each group's mean similarity.
-    sims
-        (g, 4) the similarity of each group member.
-    maav
-        Eq. 11 over CCSM/DP/WM (the paper's three methods); NaN without groups.
-    maav_with_vw
-        Eq. 11 over all four methods.
-    sd
-        (4, 4) mean |Sim_A - Sim_B| over groups.
-    linear_density
-        Method -> mean linear density (eq. 12) over the groups' results.
-    errors
-        Method -> all positional errors (eq. 13) of the groups' results, metres.
-    vw_in_window
-        Groups whose VW member lies within the same-scale window of the three others.
-    """
-
+    #: Input id.
     contour_id: FeatureId
     n_vertices: int
     closed: bool
+    #: (g, 4) level index per method (EVAL_METHODS order); columns ccsm, dp, wm from the paper's grouping, vw the VW
+    #: level nearest each group's mean similarity.
     groups: NDArray[np.intp]
+    #: (g, 4) the similarity of each group member.
     sims: NDArray[np.float64]
+    #: Eq. 11 over CCSM/DP/WM (the paper's three methods); NaN without groups.
     maav: float
+    #: Eq. 11 over all four methods.
     maav_with_vw: float
+    #: (4, 4) mean |Sim_A - Sim_B| over groups.
     sd: NDArray[np.float64]
+    #: Method -> mean linear density (eq. 12) over the groups' results.
     linear_density: dict[str, float]
+    #: Method -> all positional errors (eq. 13) of the groups' results, metres.
     errors: dict[str, NDArray[np.float64]]
+    #: Groups whose VW member lies within the same-scale window of the three others.
     vw_in_window: int
 
 
@@ -232,42 +211,29 @@ RISE_TOLERANCE = 1e-9
 
 @dataclass
 class Evaluation:
-    """Everything ``ccsm evaluate`` writes.
+    """Everything ``ccsm evaluate`` writes."""
 
-    Attributes
-    ----------
-    levels
-        Number of levels per method.
-    methods
-        Method names, the row order of ``sims``.
-    contour_ids
-        (n,) ids of the evaluated contours.
-    sims
-        (n, methods, levels) similarity of every level of every method for every evaluated contour.
-    crossings
-        Rows (method, level 0-based, intersecting pairs, crossing pairs).
-    crossing_step
-        Every how many levels crossings were counted.
-    table_contours
-        The same-scale comparison of the randomly drawn contours (Table 2, Fig. 11, Table 3).
-    bad_features
-        Contours left out, with the reason.
-    timings
-        Stage -> seconds.
-    """
-
+    #: Number of levels per method.
     levels: int
+    #: Method names, the row order of ``sims``.
     methods: tuple[str, ...]
+    #: (n,) ids of the evaluated contours.
     contour_ids: list[FeatureId]
     closed: NDArray[np.bool_]
+    #: (n, methods, levels) similarity of every level of every method for every evaluated contour.
     sims: NDArray[np.float64]
+    #: Rows (method, level 0-based, intersecting pairs, crossing pairs).
     crossings: list[tuple[str, int, int, int]]
+    #: Every how many levels crossings were counted.
     crossing_step: int
+    #: The same-scale comparison of the randomly drawn contours (Table 2, Fig. 11, Table 3).
     table_contours: list[SameScaleContour]
+    #: Contours left out, with the reason.
     bad_features: list[BadFeature]
     target: str
     seed: int
     n_input: int
+    #: Stage -> seconds.
     timings: dict[str, float] = field(default_factory=dict)
 
     def mean_curve(self) -> NDArray[np.float64]:

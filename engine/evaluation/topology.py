@@ -31,26 +31,17 @@ SCALE_METHODS: tuple[str, ...] = COMPARED_METHODS
 
 @dataclass(frozen=True)
 class ScaleTopology:
-    """Pairs of contours apart in the input that touch or cross, per method and scale.
+    """Pairs of contours apart in the input that touch or cross, per method and scale."""
 
-    Attributes
-    ----------
-    scales
-        (S,) scale denominators.
-    methods
-        Method names, the row order of ``new_pairs``.
-    new_pairs
-        (M, S) int64 pairs apart in the input that touch or cross at each scale.
-    input_pairs
-        Pairs that already meet in the input (left out of every count).
-    contours
-        Contours checked.
-    """
-
+    #: (S,) scale denominators.
     scales: NDArray[np.float64]
+    #: Method names, the row order of ``new_pairs``.
     methods: tuple[str, ...]
+    #: (M, S) int64 pairs apart in the input that touch or cross at each scale.
     new_pairs: NDArray[np.int64]
+    #: Pairs that already meet in the input (left out of every count).
     input_pairs: int
+    #: Contours checked.
     contours: int
 
     def rows(self) -> list[tuple[float, ...]]:

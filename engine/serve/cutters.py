@@ -17,7 +17,7 @@ from engine.serve.tile_request import TileOptions
 from engine.tiles.clip import clip_lines_exact, clip_lines_fast
 from engine.tiles.crossings import lines_cross_in_grid
 from engine.tiles.grid import buffered
-from engine.tiles.runs import ranges, slice_runs, slice_runs_exact
+from engine.tiles.runs import RunSet, ranges, slice_runs, slice_runs_exact
 from engine.tiles.snap_round import snap_round
 from engine.types import Bounds
 
@@ -99,7 +99,7 @@ class TileCutter:
         opts = self.options
         a, b, run_owner = runs
         lines = drawn.lines
-        pts, plen = slice_runs_exact(a, b, drawn.slice_t[run_owner], lines.base, lines.top, bounds, opts.extent)
+        pts, plen = slice_runs_exact(a, b, drawn.slice_t[run_owner], lines, bounds, opts.extent)
         lo, hi = -opts.buffer_px, opts.extent + opts.buffer_px
         c_pts, c_len, c_src = clip_lines_exact(pts, plen, lo, hi)
         q, q_len, q_src = snap_round(c_pts, c_len)
@@ -124,14 +124,9 @@ class TileCutter:
         a, b, run_owner = runs
         box = buffered(bounds, opts.buffer_px, opts.extent)
         q, plen, pbox = slice_runs(
-            a,
-            b,
+            RunSet(a, b, drawn.column[run_owner], drawn.refill[run_owner]),
             drawn.slice_t[run_owner],
-            drawn.column[run_owner],
-            drawn.refill[run_owner],
-            lines.sig,
-            lines.base,
-            lines.top,
+            lines,
             self.min_significance(box),
             bounds,
             opts.extent,

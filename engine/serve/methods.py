@@ -48,27 +48,18 @@ class RecordSource(Protocol):
 
 @dataclass(frozen=True)
 class TileLines:
-    """What a method draws in a tile, one entry per drawn contour (aligned with the contours asked for).
+    """What a method draws in a tile, one entry per drawn contour (aligned with the contours asked for)."""
 
-    Attributes
-    ----------
-    lines
-        The line set to draw from.
-    which
-        (n,) line of ``lines`` of each contour.
-    slice_t
-        (n,) t each line is sliced at (0 for lines that do not morph).
-    column
-        (n,) column of ``lines.sig`` that decides which rows a contour keeps.
-    refill
-        (n,) a line that collapses to one point is drawn again with all its rows (a contour smaller than a
-        grid cell shows as the full line does instead of vanishing).
-    """
-
+    #: The line set to draw from.
     lines: LineSet
+    #: (n,) line of ``lines`` of each contour.
     which: NDArray[np.intp]
+    #: (n,) t each line is sliced at (0 for lines that do not morph).
     slice_t: NDArray[np.float64]
+    #: (n,) column of ``lines.sig`` that decides which rows a contour keeps.
     column: NDArray[np.int64]
+    #: (n,) a line that collapses to one point is drawn again with all its rows (a contour smaller than a grid cell
+    #: shows as the full line does instead of vanishing).
     refill: NDArray[np.bool_]
 
     @classmethod

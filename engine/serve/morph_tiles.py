@@ -5,7 +5,7 @@ rounding on, the contours that would meet while morphing are held still (:mod:`e
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,9 +18,10 @@ from engine.serve.label_layer import LabelLayer
 from engine.serve.methods import Method, TileContext, TileLines
 from engine.serve.tile_request import TileOptions, TileResult, tile_latitude
 from engine.tiles.grid import buffered, check_tile, tile_bounds
-from engine.tiles.morph_untangle import MorphParts, morph_weights, untangle
+from engine.tiles.morph_crossings import MorphParts
+from engine.tiles.morph_untangle import morph_weights, untangle
 from engine.tiles.mvt import encode_line_tile
-from engine.tiles.runs import morph_runs
+from engine.tiles.runs import RunSet, morph_runs
 from engine.tiles.scale import scale_for_zoom, zoom_for_scale
 from engine.types import Bounds
 
@@ -32,31 +33,20 @@ MORPH_START_LAYER = "contours"
 MORPH_END_LAYER = "contours_end"
 
 
+@dataclass(eq=False)
 class MorphTiles:
-    """Morph tiles of the datasets of ``view``, drawn by the continuous method ``ccsm``.
+    """Morph tiles of the datasets of ``view``, drawn by the continuous method ``ccsm``."""
 
-    Parameters
-    ----------
-    view
-        The datasets.
-    labels
-        The label layer appended to each tile.
-    cutter
-        Cuts the level's end shapes when contours are held still.
-    ccsm
-        The continuous method.
-    options
-        Tile grid and zoom range.
-    """
-
-    def __init__(
-        self, view: DatasetView, labels: LabelLayer, cutter: TileCutter, ccsm: Method, options: TileOptions
-    ) -> None:
-        self.view = view
-        self.labels = labels
-        self.cutter = cutter
-        self.ccsm = ccsm
-        self.options = options
+    #: The datasets.
+    view: DatasetView
+    #: The label layer appended to each tile.
+    labels: LabelLayer
+    #: Cuts the level's end shapes when contours are held still.
+    cutter: TileCutter
+    #: The continuous method.
+    ccsm: Method
+    #: Tile grid and zoom range.
+    options: TileOptions
 
     def tile(self, dataset: str, z: int, x: int, y: int) -> TileResult:
         """A morph tile: the CCSM contours at zoom ``z`` and at ``z + 1`` with the same vertices, and their t at
@@ -90,15 +80,10 @@ class MorphTiles:
             return TileResult(None, 0, float(z), float(scales[0]))
         a, b, run_owner = runs
         q0, q1, part_len, part_run = morph_runs(
-            a,
-            b,
+            RunSet(a, b, drawn.column[run_owner], drawn.refill[run_owner]),
             ts[0][run_owner],
             ts[-1][run_owner],
-            drawn.column[run_owner],
-            drawn.refill[run_owner],
-            pack.ccs.sig,
-            pack.ccs.base,
-            pack.ccs.top,
+            pack.ccs,
             self.cutter.min_significance(box),
             bounds,
             opts.extent,

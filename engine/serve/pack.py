@@ -27,24 +27,17 @@ class LineSet:
     """The rows of many lines concatenated: line i is rows [off[i], off[i + 1]) of ``base`` and ``top``.
 
     A line is drawn at t as ``(1 - t) base + t top``; a line that does not morph has ``top is base``.
-
-    Attributes
-    ----------
-    base, top
-        (M, 2) EPSG:3857 rows.
-    off
-        (n + 1,) row offsets.
-    sig
-        (M, k) float32 significance of each row; a tile chooses one column per line.
-    chunk_off, chunks
-        (n + 1,) offsets into (C, 4) (minx, miny, maxx, maxy) boxes of each line's runs of ``chunk_rows`` rows
-        (boxes over both ``base`` and ``top``, so a slice at any t lies inside them).
     """
 
+    #: base, top: (M, 2) EPSG:3857 rows.
     base: NDArray[np.float64]
     top: NDArray[np.float64]
+    #: (n + 1,) row offsets.
     off: NDArray[np.int64]
+    #: (M, k) float32 significance of each row; a tile chooses one column per line.
     sig: NDArray[np.float32]
+    #: chunk_off, chunks: (n + 1,) offsets into (C, 4) (minx, miny, maxx, maxy) boxes of each line's runs of
+    #: ``chunk_rows`` rows (boxes over both ``base`` and ``top``, so a slice at any t lies inside them).
     chunk_off: NDArray[np.int64]
     chunks: NDArray[np.float64]
     chunk_rows: int = CHUNK_ROWS
@@ -106,19 +99,13 @@ class ContourColumns(Protocol):
 
 @dataclass(frozen=True)
 class HeadColumns:
-    """Per-contour columns of some contours, in fid order (what a pack holds of each contour besides its rows).
+    """Per-contour columns of some contours, in fid order (what a pack holds of each contour besides its rows)."""
 
-    Attributes
-    ----------
-    fid, elevation, vanish
-        (n,) feature ids (ascending), heights and vanishing scales (inf: never vanishes).
-    tables
-        (n, S) t at each scale of the dataset's ladder.
-    """
-
+    #: fid, elevation, vanish: (n,) feature ids (ascending), heights and vanishing scales (inf: never vanishes).
     fid: NDArray[np.int64]
     elevation: NDArray[np.float64]
     vanish: NDArray[np.float64]
+    #: (n, S) t at each scale of the dataset's ladder.
     tables: NDArray[np.float64]
 
     @classmethod

@@ -22,28 +22,19 @@ MAX_SIDE = 1024
 
 @dataclass(frozen=True)
 class PointGrid:
-    """Points sorted by the cell of a ``side`` x ``side`` grid over their extent.
+    """Points sorted by the cell of a ``side`` x ``side`` grid over their extent."""
 
-    Attributes
-    ----------
-    x0, y0
-        The grid's lower left corner.
-    cell_w, cell_h
-        A cell's size.
-    side
-        Cells along each side.
-    order
-        Positions of the points, sorted by cell (row by row; in a cell, by position).
-    start
-        (side * side + 1,) offsets of each cell's points in ``order``.
-    """
-
+    #: x0, y0: the grid's lower left corner.
     x0: float
     y0: float
+    #: cell_w, cell_h: a cell's size.
     cell_w: float
     cell_h: float
+    #: Cells along each side.
     side: int
+    #: Positions of the points, sorted by cell (row by row; in a cell, by position).
     order: NDArray[np.intp]
+    #: (side * side + 1,) offsets of each cell's points in ``order``.
     start: NDArray[np.int64]
 
     @classmethod

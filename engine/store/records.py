@@ -20,35 +20,28 @@ from engine.types import Coords
 
 @dataclass(frozen=True)
 class DatasetInfo:
-    """A stored dataset's metadata.
-
-    Attributes
-    ----------
-    bounds_3857
-        (minx, miny, maxx, maxy) of every contour's CCS, EPSG:3857 metres.
-    ladder
-        (S,) scale denominators at which each contour's t is tabulated.
-    data_version
-        Increases with every write of the dataset; tiles are deterministic given it.
-    """
+    """A stored dataset's metadata."""
 
     id: str
     name: str
     source: str
     source_hash: str
     params: dict[str, Any]
+    #: Increases with every write of the dataset; tiles are deterministic given it.
     data_version: int
     built_at: float
     build_seconds: float
     working_crs: str
     source_crs: str
     interval: float | None
+    #: (minx, miny, maxx, maxy) of every contour's CCS, EPSG:3857 metres.
     bounds_3857: tuple[float, float, float, float]
     n_contours: int
     n_closed: int
     n_vertices: int
     source_scale: float
     target_scale: float
+    #: (S,) scale denominators at which each contour's t is tabulated.
     ladder: NDArray[np.float64]
     bad_features: list[dict[str, Any]] = field(default_factory=list)
 
@@ -57,23 +50,6 @@ class DatasetInfo:
 class ContourColumns:
     """The columns of one contour that a build writes and a reader gets back (:class:`NewContour`,
     :class:`ContourRecord`).
-
-    Attributes
-    ----------
-    base, top
-        (M, 2) CCS rows in EPSG:3857 metres (a ring as a closed path).
-    original
-        (n, 2) input contour in EPSG:3857 (a ring as a closed path).
-    original_w
-        (n, 2) input contour in the working CRS, metres (a ring *without* its repeated vertex).
-    t_at_scale
-        (S,) t at each scale of the dataset's ladder.
-    sim_t, sim
-        The Sim(t) table.
-    sig, sig_top, sig_original
-        (M,), (M,) and (n,) float32 significance of each row of base/top together, of top alone (for a contour
-        drawn at t = 1) and of the original, EPSG:3857 metres (:mod:`engine.tiles.significance`): a tile whose
-        grid unit is u skips rows below u / 2.
     """
 
     contour_id: str
@@ -82,13 +58,21 @@ class ContourColumns:
     group: int
     vanish_scale: float
     length_m: float
+    #: base, top: (M, 2) CCS rows in EPSG:3857 metres (a ring as a closed path).
     base: Coords
     top: Coords
+    #: (n, 2) input contour in EPSG:3857 (a ring as a closed path).
     original: Coords
+    #: (n, 2) input contour in the working CRS, metres (a ring *without* its repeated vertex).
     original_w: Coords
+    #: (S,) t at each scale of the dataset's ladder.
     t_at_scale: NDArray[np.float64]
+    #: sim_t, sim: the Sim(t) table.
     sim_t: NDArray[np.float64]
     sim: NDArray[np.float64]
+    #: sig, sig_top, sig_original: (M,), (M,) and (n,) float32 significance of each row of base/top together, of top
+    #: alone (for a contour drawn at t = 1) and of the original, EPSG:3857 metres (:mod:`engine.tiles.significance`): a
+    #: tile whose grid unit is u skips rows below u / 2.
     sig: NDArray[np.float32]
     sig_top: NDArray[np.float32]
     sig_original: NDArray[np.float32]
@@ -98,16 +82,11 @@ class ContourColumns:
 class ContourRecord(ContourColumns):
     """One stored contour, decoded: every array a tile or /simplify needs (the columns of
     :class:`ContourColumns`).
-
-    Attributes
-    ----------
-    fid
-        Stable integer id of the row (MVT feature id).
-    dataset
-        The dataset's id.
     """
 
+    #: Stable integer id of the row (MVT feature id).
     fid: int
+    #: The dataset's id.
     dataset: str
 
     @property
@@ -155,34 +134,23 @@ class NewContour(ContourColumns):
 
 @dataclass(frozen=True)
 class LabelAnchors:
-    """Placed labels, one entry each (arrays aligned).
+    """Placed labels, one entry each (arrays aligned)."""
 
-    Attributes
-    ----------
-    xy
-        (n, 2) EPSG:3857 anchor points.
-    angle
-        (n,) degrees for MapLibre's ``text-rotate``: clockwise, 0 = text runs west to east; in [-90, 90] when
-        upright, else the text's top toward higher ground (docs/design.md section 9.3).
-    min_zoom
-        (n,) zoom from which the label is shown.
-    fid, rank
-        (n,) contour of each label and its rank.
-    elevation
-        (n,) its elevation.
-    text
-        The label texts.
-    box_px
-        (n, 2) width and height of each label's axis-aligned screen box (rotation included, padding included).
-    """
-
+    #: (n, 2) EPSG:3857 anchor points.
     xy: NDArray[np.float64]
+    #: (n,) degrees for MapLibre's ``text-rotate``: clockwise, 0 = text runs west to east; in [-90, 90] when upright,
+    #: else the text's top toward higher ground (docs/design.md section 9.3).
     angle: NDArray[np.float64]
+    #: (n,) zoom from which the label is shown.
     min_zoom: NDArray[np.float64]
+    #: fid, rank: (n,) contour of each label and its rank.
     fid: NDArray[np.int64]
     rank: NDArray[np.int64]
+    #: (n,) its elevation.
     elevation: NDArray[np.float64]
+    #: The label texts.
     text: list[str]
+    #: (n, 2) width and height of each label's axis-aligned screen box (rotation included, padding included).
     box_px: NDArray[np.float64]
     #: (fid, reason) of each contour whose candidates could not be found: it is left without a label (not stored
     #: with the anchors: the build report keeps it, engine/store/issues.py).

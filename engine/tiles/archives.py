@@ -32,30 +32,22 @@ FORMATS = {".pmtiles": "pmtiles", ".mbtiles": "mbtiles"}
 
 @dataclass(frozen=True)
 class ArchiveMeta:
-    """What a tile archive says about its tiles (TileJSON terms).
-
-    Attributes
-    ----------
-    bounds
-        (west, south, east, north), degrees.
-    center
-        (longitude, latitude, zoom).
-    vector_layers
-        TileJSON ``vector_layers`` entries.
-    extra
-        More members of the JSON metadata (e.g. ``ccsm_morph``).
-    """
+    """What a tile archive says about its tiles (TileJSON terms)."""
 
     name: str
     minzoom: int
     maxzoom: int
+    #: (west, south, east, north), degrees.
     bounds: tuple[float, float, float, float]
+    #: (longitude, latitude, zoom).
     center: tuple[float, float, int]
+    #: TileJSON ``vector_layers`` entries.
     vector_layers: list[dict[str, Any]]
     description: str = ""
     attribution: str = ""
     version: str = "1.0.0"
     format: str = "pbf"
+    #: More members of the JSON metadata (e.g. ``ccsm_morph``).
     extra: dict[str, Any] = field(default_factory=dict)
 
     def tilejson(self) -> dict[str, Any]:

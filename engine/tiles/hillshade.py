@@ -35,21 +35,14 @@ M_PER_DEG_LON_EQUATOR = 111_320.0
 
 @dataclass(frozen=True)
 class ShadedRelief:
-    """A DEM's hillshade on its own grid.
+    """A DEM's hillshade on its own grid."""
 
-    Attributes
-    ----------
-    shade
-        (rows, cols) float32 brightness in [0, 1] (1 on flat ground and slopes facing the light); NaN where
-        the DEM has no data.
-    transform
-        (a, b, c, d, e, f) GDAL geotransform of the grid (pixel edges), in ``crs``.
-    crs
-        The grid's CRS (any pyproj understands).
-    """
-
+    #: (rows, cols) float32 brightness in [0, 1] (1 on flat ground and slopes facing the light); NaN where the DEM has
+    #: no data.
     shade: NDArray[np.float32]
+    #: (a, b, c, d, e, f) GDAL geotransform of the grid (pixel edges), in ``crs``.
     transform: tuple[float, float, float, float, float, float]
+    #: The grid's CRS (any pyproj understands).
     crs: str
 
 

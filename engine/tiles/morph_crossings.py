@@ -23,6 +23,8 @@ only if their boxes over the step overlap.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
@@ -30,6 +32,7 @@ from numpy.typing import NDArray
 from engine.ccsm.sweep import motion_moments
 from engine.ccsm.topology import piece_ranges
 from engine.tiles.crossings import orientation_sign
+from engine.tiles.runs import ranges
 
 #: Segments per piece: the grid sees pieces, the compiled pass compares their segments pair by pair (4 was
 #: fastest on the sample's densest morph tile, against 2, 3, 5, 6 and 12).
@@ -272,22 +275,45 @@ def _piece_boxes(pos, first, last):  # pragma: no cover - compiled
     return boxes
 
 
+@dataclass(frozen=True)
+class MorphParts:
+    """The parts of a morph tile's contours: points at the start and the end of the level (same shape, grid
+    units), points per part, and the contour (0..n-1) each part belongs to, parts grouped by contour."""
+
+    start: NDArray[np.int64]
+    end: NDArray[np.int64]
+    part_len: NDArray[np.int64]
+    part_owner: NDArray[np.int64]
+
+    def of_owners(self, keep: NDArray[np.bool_]) -> MorphParts:
+        """The parts of the contours with ``keep[owner]`` true."""
+        chosen = keep[self.part_owner]
+        point_chosen = np.repeat(chosen, self.part_len)
+        return MorphParts(
+            self.start[point_chosen], self.end[point_chosen], self.part_len[chosen], self.part_owner[chosen]
+        )
+
+    @staticmethod
+    def joined(a: MorphParts, b: MorphParts) -> MorphParts:
+        """The parts of both, grouped by contour again (a contour's parts keep their order)."""
+        owner = np.concatenate([a.part_owner, b.part_owner])
+        lens = np.concatenate([a.part_len, b.part_len])
+        starts = np.cumsum(lens) - lens
+        order = np.argsort(owner, kind="stable")
+        start_pts, end_pts = np.concatenate([a.start, b.start]), np.concatenate([a.end, b.end])
+        take = ranges(starts[order], starts[order] + lens[order])
+        return MorphParts(start_pts[take], end_pts[take], lens[order], owner[order])
+
+
 def morph_crossing_pairs(
-    start: NDArray[np.int64],
-    end: NDArray[np.int64],
-    part_len: NDArray[np.int64],
-    part_owner: NDArray[np.int64],
-    w: NDArray[np.float64],
-    skip: NDArray[np.bool_] | None = None,
+    parts: MorphParts, w: NDArray[np.float64], skip: NDArray[np.bool_] | None = None
 ) -> set[tuple[int, int]]:
     """Pairs (a, b), a < b, of contours that cross properly at some fraction of the level, as a client draws them.
 
     Parameters
     ----------
-    start, end
-        (N, 2) grid points of every part at the start and at the end of the level, parts concatenated.
-    part_len, part_owner
-        (P,) points of each part, and the contour (a column of ``w``) it belongs to.
+    parts
+        The contours' parts at the start and at the end of the level; a part's owner is a column of ``w``.
     w
         (steps + 1, n) weight of the end geometry per contour at the steps (piecewise linear between them).
     skip
@@ -295,13 +321,14 @@ def morph_crossing_pairs(
 
     >>> a = np.array([[0, 0], [10, 0]]); b0, b1 = np.array([[4, 1], [6, 1]]), np.array([[4, -1], [6, -1]])
     >>> w = np.array([[0.0, 0.0], [0.0, 0.5], [0.0, 1.0]])  # b sinks through a in the first step
-    >>> parts = (np.array([2, 2]), np.array([0, 1]))
-    >>> morph_crossing_pairs(np.vstack([a, b0]), np.vstack([a, b1]), *parts, w)  # a T at most: never proper
+    >>> lens, owner = np.array([2, 2]), np.array([0, 1])
+    >>> morph_crossing_pairs(MorphParts(np.vstack([a, b0]), np.vstack([a, b1]), lens, owner), w)  # a T at most
     set()
     >>> b1 = np.array([[4, -1], [6, 3]])  # b tilts as it sinks: its left end passes below a
-    >>> morph_crossing_pairs(np.vstack([a, b0]), np.vstack([a, b1]), *parts, w)
+    >>> morph_crossing_pairs(MorphParts(np.vstack([a, b0]), np.vstack([a, b1]), lens, owner), w)
     {(0, 1)}
     """
+    start, end, part_len, part_owner = parts.start, parts.end, parts.part_len, parts.part_owner
     first, last, piece_part = (a.astype(np.int64) for a in piece_ranges(part_len, PIECE_SEGMENTS))
     if len(first) < 2:
         return set()

@@ -20,47 +20,15 @@ one snap-rounded drawing.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from engine.tiles.morph_crossings import morph_crossing_pairs
-from engine.tiles.runs import ranges
+from engine.tiles.morph_crossings import MorphParts, morph_crossing_pairs
 
 #: Rounds of holding contours before a tile holds them all: each round checks the tile again, and a long
 #: chain of contours each crossing the next is cheaper to hold at once.
 MAX_ROUNDS = 3
-
-
-@dataclass(frozen=True)
-class MorphParts:
-    """The parts of a morph tile's contours: points at the start and the end of the level (same shape, grid
-    units), points per part, and the contour (0..n-1) each part belongs to, parts grouped by contour."""
-
-    start: NDArray[np.int64]
-    end: NDArray[np.int64]
-    part_len: NDArray[np.int64]
-    part_owner: NDArray[np.int64]
-
-    def of_owners(self, keep: NDArray[np.bool_]) -> MorphParts:
-        """The parts of the contours with ``keep[owner]`` true."""
-        chosen = keep[self.part_owner]
-        point_chosen = np.repeat(chosen, self.part_len)
-        return MorphParts(
-            self.start[point_chosen], self.end[point_chosen], self.part_len[chosen], self.part_owner[chosen]
-        )
-
-    @staticmethod
-    def joined(a: MorphParts, b: MorphParts) -> MorphParts:
-        """The parts of both, grouped by contour again (a contour's parts keep their order)."""
-        owner = np.concatenate([a.part_owner, b.part_owner])
-        lens = np.concatenate([a.part_len, b.part_len])
-        starts = np.cumsum(lens) - lens
-        order = np.argsort(owner, kind="stable")
-        start_pts, end_pts = np.concatenate([a.start, b.start]), np.concatenate([a.end, b.end])
-        take = ranges(starts[order], starts[order] + lens[order])
-        return MorphParts(start_pts[take], end_pts[take], lens[order], owner[order])
 
 
 def morph_weights(t_samples: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -76,7 +44,7 @@ def morph_weights(t_samples: NDArray[np.float64]) -> NDArray[np.float64]:
 def crossing_owners(parts: MorphParts, w: NDArray[np.float64], held: NDArray[np.bool_]) -> set[int]:
     """Contours not yet held that cross another contour properly at some fraction of the level (one of the two
     moving; ``engine.tiles.morph_crossings``)."""
-    pairs = morph_crossing_pairs(parts.start, parts.end, parts.part_len, parts.part_owner, w, skip=held)
+    pairs = morph_crossing_pairs(parts, w, skip=held)
     return {o for pair in pairs for o in pair if not held[o]}
 
 

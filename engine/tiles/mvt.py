@@ -30,21 +30,14 @@ PropertyValue = bool | int | float | str
 
 @dataclass
 class LineFeature:
-    """One feature of a line layer.
+    """One feature of a line layer."""
 
-    Attributes
-    ----------
-    id
-        Stable non-negative integer id.
-    parts
-        One or more (n, 2) int64 arrays of tile-grid coordinates (y down), each with n >= 2 and no two
-        consecutive points equal.
-    properties
-        Attribute values: bool, int, float or str.
-    """
-
+    #: Stable non-negative integer id.
     id: int
+    #: One or more (n, 2) int64 arrays of tile-grid coordinates (y down), each with n >= 2 and no two consecutive points
+    #: equal.
     parts: list[NDArray[np.int64]]
+    #: Attribute values: bool, int, float or str.
     properties: dict[str, PropertyValue] = field(default_factory=dict)
 
 

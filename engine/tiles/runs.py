@@ -5,6 +5,8 @@ runs of rows a tile meets in one compiled pass.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from numba import njit
@@ -122,7 +124,7 @@ def _quantised_at(base, top, i, t, x0, y0, k):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def _slice_runs_kernel(
-    a, b, run_t, col, refill, sig, base, top, min_sig, x0, y0, k, out, plen, box
+    a, b, col, refill, run_t, sig, base, top, min_sig, x0, y0, k, out, plen, box
 ):  # pragma: no cover - compiled
     n = 0
     for r in range(len(a)):
@@ -167,27 +169,74 @@ def _slice_runs_kernel(
     return n
 
 
+class RowSource(Protocol):
+    """The rows runs are cut from: (M, 2) EPSG:3857 ``base`` and ``top`` (a slice at t lies between them) and
+    their (M, k) float32 significance ``sig``, one column per way of thinning."""
+
+    @property
+    def base(self) -> NDArray[np.float64]: ...  # noqa: D102 - described by the class
+
+    @property
+    def top(self) -> NDArray[np.float64]: ...  # noqa: D102
+
+    @property
+    def sig(self) -> NDArray[np.float32]: ...  # noqa: D102
+
+
+@dataclass(frozen=True)
+class RunSet:
+    """Runs of rows of a :class:`RowSource`: run ``r`` covers rows [a[r], b[r]), is thinned by column ``col[r]`` of
+    the significance, and is redone with all its rows when ``refill[r]`` and it collapses to one point."""
+
+    a: NDArray[np.int64]
+    b: NDArray[np.int64]
+    col: NDArray[np.int64]
+    refill: NDArray[np.bool_]
+
+    @property
+    def lengths(self) -> NDArray[np.int64]:
+        """Rows of each run."""
+        return np.asarray(self.b - self.a, dtype=np.int64)
+
+    def kernel_args(self) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_]]:
+        """The runs as the run kernels take them first, in the dtypes they are compiled for."""
+        return (
+            np.ascontiguousarray(self.a, dtype=np.int64),
+            np.ascontiguousarray(self.b, dtype=np.int64),
+            np.ascontiguousarray(self.col, dtype=np.int64),
+            np.ascontiguousarray(self.refill, dtype=np.bool_),
+        )
+
+
+def _rows_args(
+    rows: RowSource, min_sig: float, bounds: Bounds, extent: int
+) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float64], float, float, float, float]:
+    """The rows, the significance threshold and the grid (origin x, origin y, units per metre) as the run
+    kernels take them, after the runs' t."""
+    k = extent / (bounds.maxx - bounds.minx)
+    return rows.sig, rows.base, rows.top, float(min_sig), float(bounds.minx), float(bounds.maxy), float(k)
+
+
+def _float64(t: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A t array as the run kernels are compiled for it."""
+    return np.ascontiguousarray(t, dtype=np.float64)
+
+
 def slice_runs(
-    a: NDArray[np.int64],
-    b: NDArray[np.int64],
+    runs: RunSet,
     run_t: NDArray[np.float64],
-    col: NDArray[np.int64],
-    refill: NDArray[np.bool_],
-    sig: NDArray[np.float32],
-    base: NDArray[np.float64],
-    top: NDArray[np.float64],
+    rows: RowSource,
     min_sig: float,
     bounds: Bounds,
     extent: int,
 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
     """Slice, quantise and de-duplicate runs of rows in one compiled pass.
 
-    Run ``r`` covers rows [a[r], b[r]) of ``base``/``top`` (``(M, 2)`` EPSG:3857): a row is taken when it is
-    the run's first or last or its significance ``sig[row, col[r]]`` exceeds ``min_sig``; it is sliced at
-    ``run_t[r]`` (``(1 - t) base + t top``, exactly ``base`` at t <= 0 and ``top`` at t >= 1), quantised as
-    :func:`quantize` does and dropped when it lands on the previous point. A run marked ``refill`` that
-    collapses to one point is redone with all its rows (a line smaller than a grid cell shows as the full
-    line does).
+    A row of a run is taken when it is the run's first or last or its significance ``rows.sig[row, col[r]]``
+    exceeds ``min_sig``; it is sliced at ``run_t[r]`` (``(1 - t) base +
+    t top``, exactly ``base`` at t <= 0 and ``top`` at t >= 1), quantised as :func:`quantize` does and dropped
+    when it lands on the previous point. A run marked ``refill`` that collapses to one point is redone with all
+    its rows (a line smaller than a grid cell shows as the full line does).
 
     Returns
     -------
@@ -195,27 +244,12 @@ def slice_runs(
         The points of all runs concatenated, the number of each run's points, and each run's (minx, miny,
         maxx, maxy) in grid units.
     """
-    total = int((b - a).sum())
+    total = int(runs.lengths.sum())
     out = np.empty((max(total, 1), 2), dtype=np.int64)
-    plen = np.empty(len(a), dtype=np.int64)
-    box = np.empty((len(a), 4), dtype=np.int64)
-    k = extent / (bounds.maxx - bounds.minx)
+    plen = np.empty(len(runs.a), dtype=np.int64)
+    box = np.empty((len(runs.a), 4), dtype=np.int64)
     n = _slice_runs_kernel(
-        np.ascontiguousarray(a, dtype=np.int64),
-        np.ascontiguousarray(b, dtype=np.int64),
-        np.ascontiguousarray(run_t, dtype=np.float64),
-        np.ascontiguousarray(col, dtype=np.int64),
-        np.ascontiguousarray(refill, dtype=np.bool_),
-        sig,
-        base,
-        top,
-        float(min_sig),
-        float(bounds.minx),
-        float(bounds.maxy),
-        float(k),
-        out,
-        plen,
-        box,
+        *runs.kernel_args(), _float64(run_t), *_rows_args(rows, min_sig, bounds, extent), out, plen, box
     )
     return out[:n], plen, box
 
@@ -224,8 +258,7 @@ def slice_runs_exact(
     a: NDArray[np.int64],
     b: NDArray[np.int64],
     run_t: NDArray[np.float64],
-    base: NDArray[np.float64],
-    top: NDArray[np.float64],
+    rows: RowSource,
     bounds: Bounds,
     extent: int,
 ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
@@ -237,9 +270,10 @@ def slice_runs_exact(
     (pts, plen)
         (N, 2) float64 points of all runs concatenated and each run's number of points.
     """
-    rows = ranges(a, b)
+    base, top = rows.base, rows.top
+    taken = ranges(a, b)
     t = np.repeat(np.asarray(run_t, dtype=np.float64), b - a)[:, None]
-    xy = np.where(t >= 1.0, top[rows], np.where(t <= 0.0, base[rows], base[rows] + t * (top[rows] - base[rows])))
+    xy = np.where(t >= 1.0, top[taken], np.where(t <= 0.0, base[taken], base[taken] + t * (top[taken] - base[taken])))
     k = extent / (bounds.maxx - bounds.minx)
     pts = np.column_stack([(xy[:, 0] - bounds.minx) * k, (bounds.maxy - xy[:, 1]) * k])
     return pts, (b - a).astype(np.int64)
@@ -257,7 +291,7 @@ def _segment_reaches(s0, s1, j, lo, hi):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def _morph_runs_kernel(
-    a, b, t0, t1, col, refill, sig, base, top, min_sig, x0, y0, k, lo, hi, q0, q1, plen, prun, s0, s1
+    a, b, col, refill, t0, t1, sig, base, top, min_sig, x0, y0, k, lo, hi, q0, q1, plen, prun, s0, s1
 ):  # noqa: C901  # pragma: no cover - compiled, one loop nest
     n = 0
     p = 0
@@ -308,15 +342,10 @@ def _morph_runs_kernel(
 
 
 def morph_runs(
-    a: NDArray[np.int64],
-    b: NDArray[np.int64],
+    runs: RunSet,
     t_start: NDArray[np.float64],
     t_end: NDArray[np.float64],
-    col: NDArray[np.int64],
-    refill: NDArray[np.bool_],
-    sig: NDArray[np.float32],
-    base: NDArray[np.float64],
-    top: NDArray[np.float64],
+    rows: RowSource,
     min_sig: float,
     bounds: Bounds,
     extent: int,
@@ -335,29 +364,19 @@ def morph_runs(
         The parts' points at ``t_start`` and at ``t_end`` (same shape), each part's number of points (>= 2)
         and the run each part comes from (parts in run order).
     """
-    total = int((b - a).sum())
-    longest = int((b - a).max()) if len(a) else 0
+    total = int(runs.lengths.sum())
+    longest = int(runs.lengths.max()) if len(runs.a) else 0
     q0 = np.empty((max(total, 1), 2), dtype=np.int64)
     q1 = np.empty_like(q0)
     plen = np.empty(max(total, 1), dtype=np.int64)
     prun = np.empty(max(total, 1), dtype=np.int64)
     s0 = np.empty((max(longest, 1), 2), dtype=np.int64)
     s1 = np.empty_like(s0)
-    k = extent / (bounds.maxx - bounds.minx)
     n, p = _morph_runs_kernel(
-        np.ascontiguousarray(a, dtype=np.int64),
-        np.ascontiguousarray(b, dtype=np.int64),
-        np.ascontiguousarray(t_start, dtype=np.float64),
-        np.ascontiguousarray(t_end, dtype=np.float64),
-        np.ascontiguousarray(col, dtype=np.int64),
-        np.ascontiguousarray(refill, dtype=np.bool_),
-        sig,
-        base,
-        top,
-        float(min_sig),
-        float(bounds.minx),
-        float(bounds.maxy),
-        float(k),
+        *runs.kernel_args(),
+        _float64(t_start),
+        _float64(t_end),
+        *_rows_args(rows, min_sig, bounds, extent),
         -buffer_px,
         extent + buffer_px,
         q0,

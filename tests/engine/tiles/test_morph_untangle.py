@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from engine.ccsm.topology import proper_crossing_pairs
-from engine.tiles.morph_crossings import morph_crossing_pairs
-from engine.tiles.morph_untangle import MorphParts, morph_weights, untangle
+from engine.tiles.morph_crossings import MorphParts, morph_crossing_pairs
+from engine.tiles.morph_untangle import morph_weights, untangle
 
 #: Frames per level the ccsm-morph plugin draws (web/plugin/src/index.js, stepsPerZoom).
 PLUGIN_FRAMES = 32
@@ -167,7 +167,7 @@ def test_exact_pairs_agree_with_fine_sampling_on_random_motions() -> None:
         end = start + rng.integers(-8, 9, (lens.sum(), 2))
         w = np.sort(rng.random((9, n)), axis=0)
         w = (w - w[0]) / (w[-1] - w[0])
-        exact = morph_crossing_pairs(start, end, lens, np.arange(n), w)
+        exact = morph_crossing_pairs(MorphParts(start, end, lens, np.arange(n)), w)
         cut = np.cumsum(lens)[:-1]
         starts, ends = np.split(start.astype(float), cut), np.split(end.astype(float), cut)
         coarse = brute_force_pairs(starts, ends, w, 41)

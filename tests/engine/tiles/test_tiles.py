@@ -7,6 +7,7 @@ from hypothesis import strategies as st
 from reference_tiles import clip_lines, clip_to_grid, row_runs
 
 from engine.errors import InvalidParameter, TileOutOfRange
+from engine.serve.pack import LineSet
 from engine.tiles.clip import clip_lines_fast
 from engine.tiles.grid import (
     HALF_WORLD_M,
@@ -20,7 +21,7 @@ from engine.tiles.grid import (
     tile_center_latitude,
     tiles_covering,
 )
-from engine.tiles.runs import chunk_bounds, chunk_bounds_packed, collinear_free, ranges, slice_runs
+from engine.tiles.runs import RunSet, chunk_bounds, chunk_bounds_packed, collinear_free, ranges, slice_runs
 from engine.types import Bounds
 
 
@@ -136,7 +137,9 @@ def test_slice_runs_matches_numpy():
     a, b = np.array([0, 100, 250]), np.array([90, 240, 300])
     run_t = np.array([0.0, 0.4, 1.0])
     col = np.array([0, 0, 1])
-    q, plen, box = slice_runs(a, b, run_t, col, np.zeros(3, bool), sig, base, top, 10.0, bounds, 4096)
+    q, plen, box = slice_runs(
+        RunSet(a, b, col, np.zeros(3, bool)), run_t, LineSet.of(base, top, [300], sig), 10.0, bounds, 4096
+    )
     pieces = np.split(q, np.cumsum(plen)[:-1])
     for r in range(3):
         rows = np.arange(a[r], b[r])
