@@ -448,3 +448,27 @@ def dem_uphill_side(path: str | os.PathLike[str]) -> str:
     except RasterioError as exc:
         raise SourceError(f"{path}: cannot read DEM ({exc})") from exc
     return uphill_side((t.a, t.b, t.c, t.d, t.e, t.f))
+
+
+#: The geotransform's turning sense of every terrain tile mosaic: Web Mercator, north up, rows running south
+#: (:meth:`~engine.io.terrain_tiles.TileMosaic.header`); the pixel size does not change the side.
+TILE_MOSAIC_AXES = (1.0, 0.0, 0.0, 0.0, -1.0, 0.0)
+
+
+def source_uphill_side(source: str | os.PathLike[str] | RasterDem | TerrainTiles) -> str | None:
+    """The side ("left" or "right") every contour traced from a DEM source has higher ground on: a DEM file,
+    a raster read in windows (a GeoTIFF URL or an area of a file: its header's geotransform, the one the
+    windows are traced on) or a tile pyramid (always north up); None for a source that is not a DEM.
+
+    Raises
+    ------
+    SourceError
+        The DEM cannot be read.
+    """
+    if isinstance(source, TerrainTiles):
+        return uphill_side(TILE_MOSAIC_AXES)
+    if isinstance(source, RasterDem):
+        return uphill_side(source.header().transform)
+    if Path(source).suffix.lower() in DEM_SUFFIXES:
+        return dem_uphill_side(source)
+    return None
