@@ -43,6 +43,12 @@ DEM_SUFFIXES: tuple[str, ...] = RASTER_SUFFIXES + NPZ_SUFFIXES
 #: (at a node on the data's edge that is exactly at the level) is a ring.
 NODE_SNAP_PX = 0.01
 
+#: Pixels added to :data:`NODE_SNAP_PX` when it is compared: on heights in steps of 0.1 m (terrain-RGB) an
+#: artefact's vertices sit *exactly* LEVEL_OFFSET / 0.1 m = 0.01 px from the node, and rounding (a window's
+#: offset added to its vertices, about 1e-13 px) would decide on which side of the threshold they fall, so the
+#: whole grid and its windows would disagree on the same line.
+NODE_SNAP_SLACK_PX = 1e-9
+
 #: Keys of the ``.npz`` layout (matplotlib's ``jacksboro_fault_dem.npz``).
 NPZ_KEYS: tuple[str, ...] = ("elevation", "xmin", "xmax", "ymin", "ymax", "dx", "dy")
 
@@ -360,7 +366,7 @@ def _drop_node_artefacts(
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     off_node = np.abs(uv - np.round(uv)).max(axis=1)  # contourpy's vertices lie on grid edges
     farthest = np.maximum.reduceat(off_node, starts)
-    artefact = farthest < NODE_SNAP_PX
+    artefact = farthest < NODE_SNAP_PX + NODE_SNAP_SLACK_PX
     if not artefact.any():
         return uv, counts, ids, elevations, []
     bad = [
@@ -393,7 +399,7 @@ def _close_touching_rings(
     ends = np.cumsum(counts)
     starts = ends - counts
     gap = np.hypot(*(uv[ends - 1] - uv[starts]).T)
-    touching = (gap > 0) & (gap < NODE_SNAP_PX) & (counts >= 3)
+    touching = (gap > 0) & (gap < NODE_SNAP_PX + NODE_SNAP_SLACK_PX) & (counts >= 3)
     if not touching.any():
         return uv, counts
     uv = np.insert(uv, ends[touching], uv[starts[touching]], axis=0)

@@ -267,3 +267,17 @@ def test_remote_dems_store_their_uphill_side_and_their_labels_face_uphill(tmp_pa
     wrong = told & (top < foot)
     assert (np.abs(a.angle[wrong]) <= 180.0 - UPSIDE_DOWN_LIMIT_DEG + 1e-6).all(), a.angle[wrong]
     assert (np.abs(a.angle) > 90.0).sum() >= 3
+
+
+def test_windows_and_the_whole_grid_agree_on_lines_at_the_node_snap_threshold(tmp_path: Path) -> None:
+    """Heights in terrain-RGB's 0.1 m steps put a level's node artefacts exactly NODE_SNAP_PX (0.01 px) from
+    their nodes: two short lines of Maunga Whau's Web Mercator grid, by the nodata edge. Whole and in windows,
+    the same lines are kept and the same reported."""
+    pyramid = make_maunga_whau_pyramid(tmp_path)
+    whole = contours_from_dem(pyramid.geotiff, interval=10.0)
+    for block in (100, 37):
+        windowed = contours_from_dem(RasterDem(str(pyramid.geotiff)), interval=10.0, block=block)
+        assert len(windowed.contours) == len(whole.contours)
+        assert sorted(b.id for b in windowed.bad_features) == sorted(b.id for b in whole.bad_features)
+        assert_same_contours(windowed, whole, 1e-6)
+    assert len(whole.bad_features) == 2  # both artefacts of the 100 m level, reported
