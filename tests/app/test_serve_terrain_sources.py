@@ -34,8 +34,12 @@ TERRARIUM = ENCODINGS["terrarium"]
 def pyramid(tmp_path_factory: pytest.TempPathFactory) -> Pyramid:
     grid = read_dem(MAUNGA_WHAU_ASC)
     return write_pyramid(
-        tmp_path_factory.mktemp("pyramid"), grid.z.filled(np.nan), rasterio.Affine(*grid.transform), "EPSG:2193",
-        zoom=16, encoding=TERRARIUM,
+        tmp_path_factory.mktemp("pyramid"),
+        grid.z.filled(np.nan),
+        rasterio.Affine(*grid.transform),
+        "EPSG:2193",
+        zoom=16,
+        encoding=TERRARIUM,
     )
 
 
@@ -48,8 +52,16 @@ def test_serve_builds_a_tile_pyramid_at_startup_and_serves_its_tiles(tmp_path: P
     with serve_folder(pyramid.root) as tiles:
         template = f"terrarium:{tiles.url}/{{z}}/{{x}}/{{y}}.png"
         env = {"CCSM_STORE_PATH": str(store), "CCSM_BUILD_WORKERS": "1"}
-        args = [template, "http://127.0.0.1:9/missing.tif", "--bbox", bbox_text(pyramid), "--dem-zoom", "16",
-                "--interval", "10"]
+        args = [
+            template,
+            "http://127.0.0.1:9/missing.tif",
+            "--bbox",
+            bbox_text(pyramid),
+            "--dem-zoom",
+            "16",
+            "--interval",
+            "10",
+        ]
         server = LiveServer(env, args, log=tmp_path / "first.log")
         try:
             server.wait_healthy()
@@ -74,8 +86,13 @@ def test_serve_builds_a_tile_pyramid_at_startup_and_serves_its_tiles(tmp_path: P
         assert "cannot read DEM" in failed["build"]["error"]
 
         # Restart with the same source from CCSM_SOURCES (and one written wrongly): nothing is fetched or rebuilt.
-        env = {**env, "CCSM_SOURCES": json.dumps([template, "terrain:http://127.0.0.1:9/{z}/{x}/{y}.png"]),
-               "CCSM_BBOX": bbox_text(pyramid), "CCSM_DEM_ZOOM": "16", "CCSM_INTERVAL": "10"}
+        env = {
+            **env,
+            "CCSM_SOURCES": json.dumps([template, "terrain:http://127.0.0.1:9/{z}/{x}/{y}.png"]),
+            "CCSM_BBOX": bbox_text(pyramid),
+            "CCSM_DEM_ZOOM": "16",
+            "CCSM_INTERVAL": "10",
+        }
         before = tiles.count(".png")
         again = LiveServer(env, log=tmp_path / "second.log")
         try:

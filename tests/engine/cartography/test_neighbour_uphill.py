@@ -95,10 +95,18 @@ def maunga_whau_contours_file(folder: Path, seed: int) -> Path:
         coords = np.vstack([c.coords, c.coords[:1]]) if c.closed else np.asarray(c.coords)
         if rng.random() < 0.5:
             coords = coords[::-1]
-        features.append({"type": "Feature", "properties": {"ele": c.elevation},
-                         "geometry": {"type": "LineString", "coordinates": coords.tolist()}})
-    doc = {"type": "FeatureCollection", "crs": {"type": "name", "properties": {"name": "EPSG:2193"}},
-           "features": features}
+        features.append(
+            {
+                "type": "Feature",
+                "properties": {"ele": c.elevation},
+                "geometry": {"type": "LineString", "coordinates": coords.tolist()},
+            }
+        )
+    doc = {
+        "type": "FeatureCollection",
+        "crs": {"type": "name", "properties": {"name": "EPSG:2193"}},
+        "features": features,
+    }
     path = folder / "maunga-whau.geojson"
     path.write_text(json.dumps(doc))
     return path
@@ -109,8 +117,11 @@ def test_a_real_contour_file_s_labels_face_uphill(tmp_path: Path, orientation: s
     source = maunga_whau_contours_file(tmp_path, seed=3)
     store = CCSStore(tmp_path / "s.sqlite")
     options = CartographyOptions(index_every=2, label_orientation=orientation)
-    build_dataset(store, SourceSpec(source, "mw", "mw", source_scale=5_000.0, target_scale=50_000.0,
-                                    cartography=options), workers=1)
+    build_dataset(
+        store,
+        SourceSpec(source, "mw", "mw", source_scale=5_000.0, target_scale=50_000.0, cartography=options),
+        workers=1,
+    )
     stored = store.labels("mw")
     assert stored is not None
     a = stored.anchors
@@ -121,8 +132,9 @@ def test_a_real_contour_file_s_labels_face_uphill(tmp_path: Path, orientation: s
     def dem(points: np.ndarray) -> np.ndarray:
         x, y = TO_2193.transform(points[:, 0], points[:, 1])
         col, row = inverse * (np.asarray(x), np.asarray(y))
-        return ndimage.map_coordinates(grid.z.filled(np.nan), [np.asarray(row) - 0.5, np.asarray(col) - 0.5],
-                                       order=1, mode="nearest")
+        return ndimage.map_coordinates(
+            grid.z.filled(np.nan), [np.asarray(row) - 0.5, np.asarray(col) - 0.5], order=1, mode="nearest"
+        )
 
     step = text_top(a.angle) * 2.0  # 2 m of Web Mercator each side (the DEM's cells are 10 m)
     diff = dem(a.xy + step) - dem(a.xy - step)
