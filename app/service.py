@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from app.datasets.builds import BuildRunner
+from app.datasets.sources import SAMPLE_ID, SAMPLE_NAME, configured_sources, tile_cache_dir
 from app.datasets.upload_check import CheckedUpload
 from app.datasets.uploads import INCOMING_PREFIX
 from app.errors import BuildQueueFull, DatasetExists
@@ -27,7 +28,8 @@ from engine.build.datasets import RELIEF_DEM_KEY, SourceSpec, build_lock, slugif
 from engine.build.job import BuildJob
 from engine.cartography.options import PARAMS_KEY as CARTOGRAPHY_KEY
 from engine.cartography.options import CartographyOptions
-from engine.errors import CCSMError, StoreError, StoreNotReady, StoreUnwritable, UnknownLayer
+from engine.errors import StoreError, StoreNotReady, StoreUnwritable, UnknownLayer
+from engine.io.source import source_arguments
 from engine.scratch import pid_alive, remove_stale_scratch
 from engine.serve.renderer import Renderer, TileOptions
 from engine.store.records import DatasetInfo
@@ -39,46 +41,11 @@ __all__ = ["SAMPLE_ID", "SAMPLE_NAME", "DatasetService", "build_lock", "specs_fr
 
 log = logging.getLogger("ccsm.service")
 
-#: Dataset id of the bundled sample.
-SAMPLE_ID = "sample"
-SAMPLE_NAME = "Jacksboro, Tennessee: 20 m contours (USGS DEM, bundled sample)"
-
 
 def specs_from_settings(settings: Settings) -> list[SourceSpec]:
-    """The sources the settings name (the bundled sample when none is named and serve_sample is on)."""
-    common = {
-        "elevation_field": settings.elevation_field,
-        "interval": settings.interval,
-        "source_scale": settings.source_scale,
-        "target_scale": settings.target_scale,
-        "cartography": settings.cartography,
-    }
-    if settings.sources:
-        specs = []
-        seen: set[str] = set()
-        for src in settings.sources:
-            path = Path(src).expanduser()
-            ident = slugify(path.stem)
-            while ident in seen:
-                ident += "-2"
-            seen.add(ident)
-            specs.append(SourceSpec(path=path, dataset=ident, name=path.stem, **common))  # type: ignore[arg-type]
-        return specs
-    if settings.serve_sample:
-        from engine.io.sample import sample_dem_path
-        from engine.io.source import sample_contours_path
-
-        common["elevation_field"] = None
-        common["interval"] = None
-        # The sample's contours were traced from the bundled DEM: shade that under them.
-        try:
-            relief = {"relief_dem": sample_dem_path()}
-        except CCSMError:  # no DEM beside the sample (an installed wheel): no hillshade, contours still served
-            relief = {}
-        return [
-            SourceSpec(path=sample_contours_path(), dataset=SAMPLE_ID, name=SAMPLE_NAME, **common, **relief)  # type: ignore[arg-type]
-        ]
-    return []
+    """The build specs of the sources the settings name that could be read as sources
+    (:func:`app.datasets.sources.configured_sources`)."""
+    return configured_sources(settings).specs
 
 
 def source_job_params(spec: SourceSpec) -> dict[str, Any]:
@@ -185,28 +152,38 @@ class DatasetService:
             head_cache_bytes=settings.head_cache_mb << 20,
             baseline_cache_entries=settings.baseline_cache_entries,
         )
-        self.specs = specs_from_settings(settings)
+        configured = configured_sources(settings)
+        self.specs = configured.specs
+        self.source_problems = configured.problems  # dataset id -> why its source could not be read
         self.upload_dir = settings.store_path.parent / "uploads"
         self.builds = BuildRunner(settings.max_builds, settings.build_queue, self._build_ended)
         self.remove_stale_uploads()
 
     # -- builds ------------------------------------------------------------------------------------------
     def start_builds(self) -> None:
-        """Queue a build of every configured source that is missing or changed."""
+        """Queue a build of every configured source that is missing or changed; a source that could not be
+        read as one is recorded as its dataset's failed build (GET /datasets/{id} gives the reason)."""
+        for ident, why in self.source_problems.items():
+            log.error("dataset %s: %s", log_safe(ident), log_safe(why))
+            self.store.set_build_status(ident, "failed", error=why)
         for spec in self.specs:
             if self._is_current(spec):
                 self._log_contour_issues(spec.dataset)
             if self._is_current(spec) or (isinstance(spec.path, Path) and not spec.path.exists()):
                 continue
             self.store.set_build_status(spec.dataset, "building", 0, 0)
+            text, bbox, dem_zoom = source_arguments(spec.path)
             job = BuildJob(
                 kind="source",
                 store_path=str(self.settings.store_path),
                 dataset=spec.dataset,
-                source_path=str(spec.path),
+                source_path=text,
                 name=spec.name,
                 params=source_job_params(spec),
                 workers=self.settings.build_workers,
+                bbox=bbox,
+                dem_zoom=dem_zoom,
+                tile_cache=str(tile_cache_dir(self.settings)),
             )
             self.builds.submit(job, limit_queue=False)
 

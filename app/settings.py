@@ -35,6 +35,14 @@ class Settings(BaseSettings):
         default_factory=list,
         description="Contour files or DEMs to serve, comma-separated; empty = the bundled sample.",
     )
+    bbox: Annotated[tuple[float, float, float, float] | None, NoDecode] = Field(
+        None,
+        description="Area W,S,E,N in degrees of the sources that take one: required for a terrain tile source "
+        "(ENCODING:LOCATION); a GeoTIFF (a file or a URL) is read only there. Contour files are read whole.",
+    )
+    dem_zoom: int | None = Field(
+        None, ge=0, le=24, description="Zoom of terrain tile sources to read; unset = the one matching source_scale."
+    )
     serve_sample: bool = Field(True, description="Serve the bundled sample when no source is given.")
     elevation_field: str | None = Field(
         None, description="Elevation attribute of contour files (found by name if unset)."
@@ -215,6 +223,22 @@ class Settings(BaseSettings):
 
                 return json.loads(text)
             return [v.strip() for v in text.split(",") if v.strip()]
+        return value
+
+    @field_validator("bbox", mode="before")
+    @classmethod
+    def _parse_bbox(cls, value: object) -> object:
+        if isinstance(value, str):
+            from engine.io.terrain_tiles import check_bbox
+
+            parts = value.split(",")
+            try:
+                numbers = tuple(float(p) for p in parts)
+            except ValueError:
+                numbers = ()
+            if len(numbers) != 4:
+                raise ValueError(f"bbox {value!r}: expected W,S,E,N, four numbers in degrees")
+            return check_bbox(numbers, "bbox")  # type: ignore[arg-type]
         return value
 
     @field_validator("schedule")

@@ -18,11 +18,8 @@ if TYPE_CHECKING:
     from engine.store.store import CCSStore as CCSStoreType
 
 SourcesArg = Annotated[
-    list[Path] | None,
-    typer.Argument(
-        help="Contour files (GeoJSON, GeoPackage, Shapefile) or DEMs (GeoTIFF, .asc, .npz); "
-        "none = the bundled sample."
-    ),
+    list[str] | None,
+    typer.Argument(help=SOURCE_HELP.replace("Contour file", "Contour files") + " None = the bundled sample."),
 ]
 StoreOpt = Annotated[
     Path | None, typer.Option("--store", help="SQLite store file [env CCSM_STORE_PATH; var/ccsm.sqlite].")
@@ -60,6 +57,8 @@ def serve(
     store: StoreOpt = None,
     elevation_field: ElevOpt = None,
     interval: IntervalOpt = None,
+    bbox: BboxOption = None,
+    dem_zoom: DemZoomOption = None,
     source_scale: SourceScaleOpt = None,
     target_scale: TargetScaleOpt = None,
     log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info",
@@ -72,11 +71,9 @@ def serve(
     import uvicorn
 
     if sources:
-        missing = [str(s) for s in sources if not s.exists()]
-        if missing:
-            typer.echo(f"error: source not found: {', '.join(missing)}", err=True)
-            raise typer.Exit(2)
-        os.environ["CCSM_SOURCES"] = ",".join(str(s.resolve()) for s in sources)
+        os.environ["CCSM_SOURCES"] = _checked_sources(sources, bbox, dem_zoom, source_scale)
+    _set_env("BBOX", bbox)
+    _set_env("DEM_ZOOM", dem_zoom)
     _set_env("STORE_PATH", store)
     _set_env("ELEVATION_FIELD", elevation_field)
     _set_env("INTERVAL", interval)
@@ -107,6 +104,31 @@ def serve(
         proxy_headers=True,
         http=HTTP_PROTOCOL,
     )
+
+
+def _checked_sources(sources: list[str], bbox: str | None, dem_zoom: int | None, source_scale: float | None) -> str:
+    """The sources as CCSM_SOURCES takes them (local files made absolute), each checked as ``ccsm build``
+    checks it but with nothing fetched (their builds run once the server is up); exit status 2 on the first
+    that is not a source."""
+    import json
+
+    from app.cli.terrain_options import parse_bbox
+    from app.datasets.sources import configured_source
+    from engine.errors import CCSMError
+
+    out = []
+    for text in sources:
+        try:
+            area = parse_bbox(bbox)
+            source = configured_source(text, bbox=area, dem_zoom=dem_zoom, source_scale=source_scale or 50_000.0)
+        except CCSMError as exc:
+            typer.echo(f"error: {exc}", err=True)
+            raise typer.Exit(2) from None
+        if isinstance(source, Path) and not source.exists():
+            typer.echo(f"error: source not found: {text}", err=True)
+            raise typer.Exit(2)
+        out.append(str(Path(text).resolve()) if Path(text).exists() else text)
+    return json.dumps(out) if any("," in s for s in out) else ",".join(out)
 
 
 def _check_store_or_exit(store_path: Path) -> None:

@@ -27,7 +27,7 @@ from engine.cartography.units import source_units
 from engine.ccsm.build import BuiltSet, SpooledSet, build_into
 from engine.ccsm.ccs import CCS
 from engine.ccsm.spool import surface_of
-from engine.io.dem import DEM_SUFFIXES, dem_uphill_side
+from engine.io.dem import DEM_SUFFIXES, source_uphill_side
 from engine.io.source import Source, read_source, source_file
 from engine.parallel import map_ordered
 from engine.params import BuildParams
@@ -126,10 +126,10 @@ class SourceSpec:
             units = (source_units(local, self.elevation_field) if local is not None else None) or "m"
             options = replace(options, units=units)
         stored = {**self.params(), PARAMS_KEY: options.as_params()}
-        # Traced lines all keep higher ground on one side (a local DEM file; tile and remote sources are
-        # labelled upright for now).
-        if isinstance(self.path, Path) and self.path.suffix.lower() in DEM_SUFFIXES:
-            stored[UPHILL_SIDE_KEY] = dem_uphill_side(self.path)
+        # Lines traced from a DEM (a file, a GeoTIFF URL, a tile pyramid) all keep higher ground on one side.
+        uphill = source_uphill_side(self.path)
+        if uphill is not None:
+            stored[UPHILL_SIDE_KEY] = uphill
         relief = self.relief_path()
         if relief is not None:
             stored[RELIEF_DEM_KEY] = str(relief.resolve())

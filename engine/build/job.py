@@ -33,7 +33,8 @@ from engine.build.datasets import (
 )
 from engine.cartography.options import PARAMS_KEY, CartographyOptions
 from engine.errors import BuildCancelled, CCSMError
-from engine.io.source import read_source
+from engine.io.source import Source, parse_source, read_source
+from engine.io.tile_fetch import TileCache
 from engine.parallel import lower_priority
 from engine.store.store import CCSStore
 
@@ -64,6 +65,12 @@ class BuildJob:
     #: Content hash recorded with an upload (a source's is computed from its file).
     digest: str = ""
     workers: int | None = 1
+    #: With ``source_path``, the source as :func:`engine.io.source.parse_source` takes it: its area and zoom
+    #: (:func:`engine.io.source.source_arguments`).
+    bbox: tuple[float, float, float, float] | None = None
+    dem_zoom: int | None = None
+    #: The folder a tile pyramid's fetched tiles are kept in (None: in memory only).
+    tile_cache: str | None = None
 
     def to_json(self) -> str:
         """The job as the JSON line the build process reads."""
@@ -72,7 +79,20 @@ class BuildJob:
     @classmethod
     def from_json(cls, text: str) -> BuildJob:
         """Parse :meth:`to_json`'s output."""
-        return cls(**json.loads(text))
+        fields = json.loads(text)
+        if fields.get("bbox") is not None:
+            fields["bbox"] = tuple(fields["bbox"])
+        return cls(**fields)
+
+    def source(self) -> Source:
+        """The source a ``source`` job builds."""
+        return parse_source(
+            self.source_path,
+            bbox=self.bbox,
+            dem_zoom=self.dem_zoom,
+            source_scale=float(self.params.get("source_scale", 50_000.0)),
+            tile_cache=TileCache(self.tile_cache) if self.tile_cache is not None else None,
+        )
 
 
 def _progress_reporter(store: CCSStore, dataset: str) -> Any:
@@ -136,7 +156,7 @@ def run(job: BuildJob) -> int:
                 fields[PARAMS_KEY] = CartographyOptions.from_params(job.params)
             if fields.get(RELIEF_DEM_KEY):
                 fields[RELIEF_DEM_KEY] = Path(fields[RELIEF_DEM_KEY])
-            spec = SourceSpec(Path(job.source_path), job.dataset, job.name, **fields)
+            spec = SourceSpec(job.source(), job.dataset, job.name, **fields)
             with build_lock(Path(job.store_path)):
                 progress(0, 0)  # cancelled while waiting for the lock: stop here
                 _, rebuilt = build_dataset(

@@ -10,11 +10,15 @@ the result.
 from __future__ import annotations
 
 from concurrent.futures import Executor
+from dataclasses import replace
+
+import numpy as np
 
 from engine.cartography.dataset import dataset_cartography, label_sources
-from engine.cartography.labels import place_labels
+from engine.cartography.labels import orient_angle, place_labels
+from engine.cartography.neighbour_uphill import PROBE_M, top_uphill
 from engine.intervals import infer_interval
-from engine.store.records import LabelPlacer, StoredLabels
+from engine.store.records import LabelAnchors, LabelPlacer, StoredLabels
 from engine.store.store import CCSStore
 
 #: The largest tile zoom served unless configured otherwise; builds place labels for it.
@@ -48,13 +52,44 @@ def place_dataset_labels(
     sources = (src for records in batches for src in label_sources(carto, records))
     last_zoom = label_last_zoom(max_zoom)
     anchors = place_labels(sources, info.ladder, carto.latitude, last_zoom, executor=executor)
+    if carto.options.label_orientation == "uphill" and carto.uphill_side is None:
+        anchors = uphill_from_neighbours(store, dataset, anchors)  # placed upright: the source gives no side
     return StoredLabels(info.data_version, last_zoom, anchors)
 
 
-def label_placer(
-    store: CCSStore, max_zoom: int = DEFAULT_MAX_ZOOM, executor: Executor | None = None
-) -> LabelPlacer:
+#: Labels whose neighbouring contours are read from the store at a time (near one another: sorted by cell).
+ANCHORS_PER_QUERY = 256
+#: Side of the cells (EPSG:3857 metres) labels are grouped by before they are taken ANCHORS_PER_QUERY at a time.
+NEIGHBOUR_CELL_M = 20_000.0
+
+
+def uphill_from_neighbours(store: CCSStore, dataset: str, anchors: LabelAnchors) -> LabelAnchors:
+    """The labels, placed upright, each turned with its top toward higher ground where the neighbouring
+    contours tell which side that is (:mod:`engine.cartography.neighbour_uphill`; past
+    :data:`~engine.cartography.labels.UPSIDE_DOWN_LIMIT_DEG` from upright it stays upright). A half turn keeps
+    a label's box, so the placement holds."""
+    if not len(anchors.xy):
+        return anchors
+    angle = anchors.angle.copy()
+    cell = np.floor(anchors.xy / NEIGHBOUR_CELL_M).astype(np.int64)
+    order = np.lexsort((cell[:, 1], cell[:, 0]))
+    for k in range(0, len(order), ANCHORS_PER_QUERY):
+        idx = order[k : k + ANCHORS_PER_QUERY]
+        lo, hi = anchors.xy[idx].min(axis=0) - PROBE_M, anchors.xy[idx].max(axis=0) + PROBE_M
+        records = store.load(store.query(dataset, (lo[0], lo[1], hi[0], hi[1])))
+        lines = [np.vstack([r.base, r.base[:1]]) if r.closed else r.base for r in records]
+        heights = np.array([r.elevation for r in records], dtype=np.float64)
+        signs = top_uphill(anchors.xy[idx], angle[idx], anchors.elevation[idx], lines, heights)
+        a = np.radians(angle[idx])
+        turned = angle[idx]
+        for sign in (1, -1):  # the text reads along (cos a, -sin a), its top on that direction's left
+            pick = signs == sign
+            turned[pick] = orient_angle(np.cos(a[pick]), -np.sin(a[pick]), sign)
+        angle[idx] = turned
+    return replace(anchors, angle=angle)
+
+
+def label_placer(store: CCSStore, max_zoom: int = DEFAULT_MAX_ZOOM, executor: Executor | None = None) -> LabelPlacer:
     """What :meth:`CCSStore.save` calls, with the id its rows are staged under, to place the labels of the
     version it writes (the candidates found on ``executor``, as the build's other work)."""
     return lambda staged: place_dataset_labels(store, staged, max_zoom, executor)
-

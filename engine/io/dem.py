@@ -43,6 +43,12 @@ DEM_SUFFIXES: tuple[str, ...] = RASTER_SUFFIXES + NPZ_SUFFIXES
 #: (at a node on the data's edge that is exactly at the level) is a ring.
 NODE_SNAP_PX = 0.01
 
+#: Pixels added to :data:`NODE_SNAP_PX` when it is compared: on heights in steps of 0.1 m (terrain-RGB) an
+#: artefact's vertices sit *exactly* LEVEL_OFFSET / 0.1 m = 0.01 px from the node, and rounding (a window's
+#: offset added to its vertices, about 1e-13 px) would decide on which side of the threshold they fall, so the
+#: whole grid and its windows would disagree on the same line.
+NODE_SNAP_SLACK_PX = 1e-9
+
 #: Keys of the ``.npz`` layout (matplotlib's ``jacksboro_fault_dem.npz``).
 NPZ_KEYS: tuple[str, ...] = ("elevation", "xmin", "xmax", "ymin", "ymax", "dx", "dy")
 
@@ -360,7 +366,7 @@ def _drop_node_artefacts(
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     off_node = np.abs(uv - np.round(uv)).max(axis=1)  # contourpy's vertices lie on grid edges
     farthest = np.maximum.reduceat(off_node, starts)
-    artefact = farthest < NODE_SNAP_PX
+    artefact = farthest < NODE_SNAP_PX + NODE_SNAP_SLACK_PX
     if not artefact.any():
         return uv, counts, ids, elevations, []
     bad = [
@@ -393,7 +399,7 @@ def _close_touching_rings(
     ends = np.cumsum(counts)
     starts = ends - counts
     gap = np.hypot(*(uv[ends - 1] - uv[starts]).T)
-    touching = (gap > 0) & (gap < NODE_SNAP_PX) & (counts >= 3)
+    touching = (gap > 0) & (gap < NODE_SNAP_PX + NODE_SNAP_SLACK_PX) & (counts >= 3)
     if not touching.any():
         return uv, counts
     uv = np.insert(uv, ends[touching], uv[starts[touching]], axis=0)
@@ -448,3 +454,27 @@ def dem_uphill_side(path: str | os.PathLike[str]) -> str:
     except RasterioError as exc:
         raise SourceError(f"{path}: cannot read DEM ({exc})") from exc
     return uphill_side((t.a, t.b, t.c, t.d, t.e, t.f))
+
+
+#: The geotransform's turning sense of every terrain tile mosaic: Web Mercator, north up, rows running south
+#: (:meth:`~engine.io.terrain_tiles.TileMosaic.header`); the pixel size does not change the side.
+TILE_MOSAIC_AXES = (1.0, 0.0, 0.0, 0.0, -1.0, 0.0)
+
+
+def source_uphill_side(source: str | os.PathLike[str] | RasterDem | TerrainTiles) -> str | None:
+    """The side ("left" or "right") every contour traced from a DEM source has higher ground on: a DEM file,
+    a raster read in windows (a GeoTIFF URL or an area of a file: its header's geotransform, the one the
+    windows are traced on) or a tile pyramid (always north up); None for a source that is not a DEM.
+
+    Raises
+    ------
+    SourceError
+        The DEM cannot be read.
+    """
+    if isinstance(source, TerrainTiles):
+        return uphill_side(TILE_MOSAIC_AXES)
+    if isinstance(source, RasterDem):
+        return uphill_side(source.header().transform)
+    if Path(source).suffix.lower() in DEM_SUFFIXES:
+        return dem_uphill_side(source)
+    return None

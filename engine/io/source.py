@@ -21,7 +21,14 @@ from engine.io.dem import DEM_SUFFIXES, RASTER_SUFFIXES, contours_from_dem
 from engine.io.geojson_writer import write_geojson
 from engine.io.raster_windows import REMOTE_SUFFIXES, RasterDem, is_url
 from engine.io.sample import sample_contours_path, sample_dem_path
-from engine.io.terrain_tiles import ENCODING_SYNTAX, TerrainTiles, check_bbox, looks_like_encoding, parse_encoding
+from engine.io.terrain_tiles import (
+    ENCODING_SYNTAX,
+    ENCODINGS,
+    TerrainTiles,
+    check_bbox,
+    looks_like_encoding,
+    parse_encoding,
+)
 from engine.io.tile_fetch import TileCache
 from engine.io.vector_reader import VECTOR_SUFFIXES, read_contours
 from engine.scratch import ReadScratch
@@ -114,6 +121,27 @@ def parse_source(
     if not path.exists():
         raise SourceError(f"{path}: file not found")
     return RasterDem(str(path.resolve()), check_bbox(bbox, raw))
+
+
+def takes_area(text: str) -> bool:
+    """True when the source ``text`` names can be read over an area (``bbox``): a tile pyramid, a GeoTIFF URL
+    or a raster file; a contour file or an ``.npz`` is always read whole."""
+    if looks_like_encoding(text) is not None or is_url(text):
+        return True
+    return Path(text).suffix.lower() in RASTER_SUFFIXES
+
+
+def source_arguments(source: Source) -> tuple[str, tuple[float, float, float, float] | None, int | None]:
+    """What :func:`parse_source` takes to give ``source`` again: the text, the area and the DEM zoom (how a
+    build process is told its source)."""
+    if isinstance(source, TerrainTiles):
+        e = source.encoding
+        named = ENCODINGS.get(e.name)
+        head = e.name if named == e else f"custom:{e.base!r}:{e.scale!r}"
+        return f"{head}:{source.location}", source.bbox, source.zoom
+    if isinstance(source, RasterDem):
+        return source.location, source.bbox, None
+    return str(source), None, None
 
 
 def source_file(source: Source) -> Path | None:

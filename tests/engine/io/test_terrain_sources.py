@@ -227,3 +227,57 @@ def test_the_decoders_follow_the_published_formulas() -> None:
     assert MAPBOX.decode(rgb)[0, :2].round(9).tolist() == [0.0, 1.0]
     assert TERRARIUM.decode(rgb)[0, 2:].tolist() == [0.0, 100.5, -32768.0]
     assert MAPBOX.decode(rgb)[0, 4] == -10000.0
+
+
+@pytest.mark.parametrize("kind", ["pyramid", "cog"])
+def test_remote_dems_store_their_uphill_side_and_their_labels_face_uphill(tmp_path: Path, kind: str) -> None:
+    """A served tile pyramid and a served COG (north up) keep higher ground on the traced lines' right; the
+    build stores that, and each label's top faces higher ground on the DEM the tiles were cut from."""
+    from scipy import ndimage
+
+    from engine.build.datasets import SourceSpec, build_dataset
+    from engine.cartography.labels import UPSIDE_DOWN_LIMIT_DEG
+    from engine.cartography.neighbour_uphill import text_top
+    from engine.cartography.options import CartographyOptions
+    from engine.store.store import CCSStore
+
+    pyramid = make_maunga_whau_pyramid(tmp_path)  # its GeoTIFF is the tiles' Web Mercator grid
+    if kind == "cog":
+        (tmp_path / "root").mkdir()
+        with rasterio.open(pyramid.geotiff) as src:
+            write_cog(tmp_path / "root" / "mw.tif", src.read(1), src.transform, "EPSG:3857")
+    root = pyramid.root if kind == "pyramid" else tmp_path / "root"
+    store = CCSStore(tmp_path / "s.sqlite")
+    with serve_folder(root) as server:
+        source = tiles_of(pyramid, server.url, MAPBOX) if kind == "pyramid" else RasterDem(server.url + "/mw.tif")
+        spec = SourceSpec(source, "mw", "mw", interval=5.0, source_scale=5_000.0, target_scale=50_000.0,
+                          cartography=CartographyOptions(index_every=2))
+        build_dataset(store, spec, workers=1)
+    assert store.dataset("mw").params["uphill_side"] == "right"
+    stored = store.labels("mw")
+    assert stored is not None and len(stored.anchors.xy) >= 10
+    a = stored.anchors
+    with rasterio.open(pyramid.geotiff) as src:
+        z, inverse = src.read(1).astype(np.float64), ~src.transform
+    step = text_top(a.angle) * 2.0
+    (c0, r0), (c1, r1) = (inverse * tuple((a.xy + s).T) for s in (step, -step))
+    top = ndimage.map_coordinates(z, [np.asarray(r0) - 0.5, np.asarray(c0) - 0.5], order=1, mode="nearest")
+    foot = ndimage.map_coordinates(z, [np.asarray(r1) - 0.5, np.asarray(c1) - 0.5], order=1, mode="nearest")
+    told = np.isfinite(top - foot) & (np.abs(top - foot) > 0.05)
+    wrong = told & (top < foot)
+    assert (np.abs(a.angle[wrong]) <= 180.0 - UPSIDE_DOWN_LIMIT_DEG + 1e-6).all(), a.angle[wrong]
+    assert (np.abs(a.angle) > 90.0).sum() >= 3
+
+
+def test_windows_and_the_whole_grid_agree_on_lines_at_the_node_snap_threshold(tmp_path: Path) -> None:
+    """Heights in terrain-RGB's 0.1 m steps put a level's node artefacts exactly NODE_SNAP_PX (0.01 px) from
+    their nodes: two short lines of Maunga Whau's Web Mercator grid, by the nodata edge. Whole and in windows,
+    the same lines are kept and the same reported."""
+    pyramid = make_maunga_whau_pyramid(tmp_path)
+    whole = contours_from_dem(pyramid.geotiff, interval=10.0)
+    for block in (100, 37):
+        windowed = contours_from_dem(RasterDem(str(pyramid.geotiff)), interval=10.0, block=block)
+        assert len(windowed.contours) == len(whole.contours)
+        assert sorted(b.id for b in windowed.bad_features) == sorted(b.id for b in whole.bad_features)
+        assert_same_contours(windowed, whole, 1e-6)
+    assert len(whole.bad_features) == 2  # both artefacts of the 100 m level, reported
