@@ -49,7 +49,9 @@ def placed_by_hand(store: CCSStore, dataset: str, last_zoom: float):  # noqa: AN
     elevations = store.elevations(dataset)
     carto = dataset_cartography(info, info.interval or infer_interval(elevations), elevations)
     sources = label_sources(carto, store.load(store.all_fids(dataset)))
-    return place_labels(sources, info.ladder, carto.latitude, last_zoom)
+    upright = place_labels(sources, info.ladder, carto.latitude, last_zoom)
+    assert carto.options.label_orientation == "uphill" and carto.uphill_side is None  # a contour file's labels
+    return build_labels.uphill_from_neighbours(store, dataset, upright)
 
 
 def test_stored_labels_are_those_placed_from_the_stored_contours(sample_store: Path) -> None:
