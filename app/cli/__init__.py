@@ -30,10 +30,16 @@ def _register_commands() -> None:
         commands_service,  # noqa: F401  serve, build
     )
 
-    # ``ccsm --help`` lists each command with its docstring's whole first line: click would cut it to fit.
+    # ``ccsm --help`` lists each command with its docstring's whole first paragraph (its summary sentence,
+    # which may wrap onto a second line): click would cut it to fit.
     for command in app.registered_commands:
         if command.short_help is None and command.callback is not None and command.callback.__doc__:
-            command.short_help = inspect.cleandoc(command.callback.__doc__).partition("\n")[0]
+            command.short_help = command_summary(command.callback.__doc__)
+
+
+def command_summary(doc: str) -> str:
+    """A command docstring's first paragraph on one line."""
+    return " ".join(inspect.cleandoc(doc).partition("\n\n")[0].split())
 
 
 def main() -> None:

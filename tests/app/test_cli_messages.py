@@ -228,8 +228,9 @@ def test_help_lists_every_command_with_its_whole_summary() -> None:
     assert {"simplify", "evaluate", "export", "serve", "build"} <= set(names)
     for name in names:
         doc = group.commands[name].callback.__doc__  # type: ignore[attr-defined]
-        first = one_line(doc.strip().splitlines()[0])
-        assert f"{name} {first}" in page, f"ccsm --help cut {name!r}: {page}"
+        summary = one_line(doc.strip().split("\n\n")[0])
+        assert summary.endswith("."), f"{name}'s summary is not a whole sentence: {summary!r}"
+        assert f"{name} {summary}" in page, f"ccsm --help cut {name!r}: {page}"
     assert "..." not in page.split("Commands:", 1)[1]
 
 
