@@ -14,6 +14,7 @@ anchors hold still their distance on screen only grows with the zoom, so that zo
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -23,13 +24,7 @@ from synthetic_rasters import fractal_heights, write_geotiff
 
 from engine.build.datasets import SourceSpec, build_dataset
 from engine.cartography.labels import LabelStyle, metres_per_px
-from engine.cartography.style import (
-    INDEX_LINE_WIDTH_ALONE_PX,
-    INDEX_LINE_WIDTH_PX,
-    LINE_WIDTH_PX,
-    RankFade,
-    rank_opacity_at,
-)
+from engine.cartography.style import StyleSource, build_style, rank_fades
 from engine.serve.renderer import Renderer
 from engine.serve.simplify import simplify
 from engine.store.store import CCSStore
@@ -119,30 +114,76 @@ def test_labels_carry_their_elevation_with_the_unit_and_sit_on_index_contours(se
     assert all(t == f"{e:g} m" for t, e in zip(labels.text, labels.elevation.tolist(), strict=True))
 
 
+def style_value(expr: Any, zoom: float, props: dict[str, float]) -> Any:
+    """A MapLibre expression of the kinds the style's line layers use, evaluated as MapLibre does for one
+    feature at one zoom (``interpolate`` linear or exponential on ``zoom``, clamped at its ends; ``case``; ``==``;
+    ``get``; ``to-number``), so the ink is measured with the widths and opacities the style really draws."""
+    if not isinstance(expr, list):
+        return expr
+    op, args = expr[0], expr[1:]
+    if op == "get":
+        return props.get(args[0])
+    if op == "to-number":
+        for arg in args:
+            value = style_value(arg, zoom, props)
+            if value is not None:
+                return float(value)
+        raise AssertionError(f"to-number of nothing: {expr}")
+    if op == "==":
+        return style_value(args[0], zoom, props) == style_value(args[1], zoom, props)
+    if op == "case":
+        for k in range(0, len(args) - 1, 2):
+            if style_value(args[k], zoom, props):
+                return style_value(args[k + 1], zoom, props)
+        return style_value(args[-1], zoom, props)
+    if op == "interpolate":
+        return zoom_ramp_value(expr, zoom, props)
+    raise AssertionError(f"expression {op!r} not measured here: {expr}")
+
+
+def zoom_ramp_value(expr: list[Any], zoom: float, props: dict[str, float]) -> float:
+    """:func:`style_value` of an ``interpolate`` on ``zoom`` (linear or exponential, clamped at its ends)."""
+    how, on, stops = expr[1], expr[2], expr[3:]
+    assert on == ["zoom"], f"only zoom ramps are measured here: {expr}"
+    zs, values = stops[0::2], stops[1::2]
+    if zoom <= zs[0]:
+        return float(style_value(values[0], zoom, props))
+    if zoom >= zs[-1]:
+        return float(style_value(values[-1], zoom, props))
+    k = next(k for k in range(len(zs) - 1) if zs[k] <= zoom < zs[k + 1])
+    base = how[1] if how[0] == "exponential" else 1.0
+    span, at = zs[k + 1] - zs[k], zoom - zs[k]
+    t = at / span if base == 1.0 else (base**at - 1) / (base**span - 1)
+    a, b = style_value(values[k], zoom, props), style_value(values[k + 1], zoom, props)
+    return float(a + (b - a) * t)
+
+
 def ink_share(renderer: Renderer, dataset: str, scale: float, *, all_levels: bool = False) -> float:
-    """Share of the data's area covered by lines at a scale: each drawn contour's length on screen times its
-    width as the style draws it there (index lines thinning from INDEX_LINE_WIDTH_PX to
-    INDEX_LINE_WIDTH_ALONE_PX as rank 0 fades, style.line_width) times its rank's opacity, over the area
+    """Share of the data's area covered by lines at a scale: each drawn contour's length on screen times the
+    ``line-width`` and ``line-opacity`` of the style's line layer drawing it there (the style the service
+    serves, :func:`build_style` of the dataset's schedule; index lines thin as rank 0 fades), over the area
     (overlaps count twice). ``all_levels``: every level, at full opacity and width (no interval schedule)."""
     carto = renderer.cartography(dataset)
     zoom = float(zoom_for_scale(scale, carto.latitude))
     mpp = float(metres_per_px(zoom))
-    fades = {
-        k.rank: RankFade(k.rank, k.fade_zoom, None if k.hide_scale is None else k.hide_zoom)
-        for k in carto.schedule.ranks
-    }
-    base = fades[min(fades)]  # rank 0: index lines thin as it fades (same ramp as its opacity)
-    index_width = INDEX_LINE_WIDTH_ALONE_PX + (INDEX_LINE_WIDTH_PX - INDEX_LINE_WIDTH_ALONE_PX) * (
-        1.0 if all_levels else rank_opacity_at(base, zoom)
-    )
+    style = build_style(StyleSource(dataset, dataset, "t", "g", (0, 0, 1, 1), rank_fades(carto.schedule)))
+    lines = [layer for layer in style["layers"] if layer.get("source-layer") == "contours"]
+    assert lines, "the style draws no contour layer"
     info, _ = renderer.info(dataset)
     minx, miny, maxx, maxy = info.bounds_3857
     area_px = (maxx - minx) * (maxy - miny) / mpp**2
     ink = 0.0
     for c in simplify(renderer, dataset, scale, all_levels=all_levels).contours:
         length_px = float(np.hypot(*np.diff(c.coords_3857, axis=0).T).sum()) / mpp
-        width = index_width if c.level == 1 else LINE_WIDTH_PX
-        ink += length_px * width * (1.0 if all_levels else rank_opacity_at(fades[c.rank], zoom))
+        props = {"level": c.level, "rank": c.rank}
+        for layer in lines:
+            if not style_value(layer["filter"], zoom, props):
+                continue
+            if all_levels:  # every level fully drawn: the widths past every ramp's end, at full opacity
+                ink += length_px * float(style_value(layer["paint"]["line-width"], 99.0, props))
+            elif zoom >= layer.get("minzoom", -1.0):
+                width = float(style_value(layer["paint"]["line-width"], zoom, props))
+                ink += length_px * width * float(style_value(layer["paint"]["line-opacity"], zoom, props))
     return ink / area_px
 
 
