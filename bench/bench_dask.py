@@ -56,8 +56,20 @@ def start_cluster(workers: int, logs: Path, env: dict[str, str]) -> tuple[str, l
     procs = [subprocess.Popen(scheduler, env=env, stdout=open(logs / "scheduler.log", "wb"), stderr=subprocess.STDOUT)]  # noqa: SIM115
     time.sleep(2.0)
     for k in range(workers):
-        worker = [str(DASK), "worker", address, "--nworkers", "1", "--nthreads", "1", "--no-dashboard",
-                  "--name", f"w{k}", "--host", "127.0.0.1"]
+        worker = [
+            str(DASK),
+            "worker",
+            address,
+            "--nworkers",
+            "1",
+            "--nthreads",
+            "1",
+            "--no-dashboard",
+            "--name",
+            f"w{k}",
+            "--host",
+            "127.0.0.1",
+        ]
         procs.append(subprocess.Popen(worker, env=env, stdout=open(logs / f"w{k}.log", "wb"), stderr=subprocess.STDOUT))  # noqa: SIM115
     with Client(address, timeout=30) as client:
         client.wait_for_workers(workers, timeout=60)
@@ -96,8 +108,22 @@ def build(
     """Wall time of ``ccsm build`` on the cluster, as a user runs it, and the CPU seconds it took in the
     client, the scheduler and the workers: where the client's share is large, two workers cannot be twice
     as fast as one (the client's serial work runs beside one worker on the other core, but not beside two)."""
-    command = [sys.executable, "-c", "from app.cli import main; main()", "build", str(dem), "--interval",
-               str(interval), "--store", str(store), "--id", "bench", "--force", "--scheduler", scheduler]
+    command = [
+        sys.executable,
+        "-c",
+        "from app.cli import main; main()",
+        "build",
+        str(dem),
+        "--interval",
+        str(interval),
+        "--store",
+        str(store),
+        "--id",
+        "bench",
+        "--force",
+        "--scheduler",
+        scheduler,
+    ]
     before = [cpu_seconds(p) for p in procs]
     client0 = client_cpu()
     t0 = time.perf_counter()
@@ -132,7 +158,10 @@ def main() -> None:
     parser.add_argument("--workers", default="1,2")
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument(
-        "--code", type=Path, action="append", default=None,
+        "--code",
+        type=Path,
+        action="append",
+        default=None,
         help="checkout whose code runs the build (repeatable, to compare two in one run) [this one]",
     )
     args = parser.parse_args()
@@ -147,8 +176,10 @@ def main() -> None:
     dem = dem.resolve()
     print(f"DEM {dem.name}, interval {args.interval:g} m; {os.cpu_count()} cores; best of {args.repeat}")
     print("CPU s: of the ccsm build client, the scheduler and all workers together, during the build")
-    print(f"{'code':>24} {'workers':>7} {'build s':>8} {'speed-up':>8} {'client':>7} {'sched':>6} {'workers':>8}"
-          f" {'tiles sha256':>16}")
+    print(
+        f"{'code':>24} {'workers':>7} {'build s':>8} {'speed-up':>8} {'client':>7} {'sched':>6} {'workers':>8}"
+        f" {'tiles sha256':>16}"
+    )
     with tempfile.TemporaryDirectory() as tmp:
         for code in [c.resolve() for c in args.code or [REPO]]:
             env = code_env(code)
