@@ -187,7 +187,7 @@ def table(size: int, dem: Path, theirs: list[Step], mine: list[Step], args: argp
     for s in rows:
         lines = f"{s.lines:8d}" if s.lines else f"{'':8}"
         vertices = f"{s.vertices:10d}" if s.vertices else f"{'':10}"
-        print(f"{s.name:22} {s.wall_s:8.1f} {s.cpu_s:8.1f} {s.out_bytes / 1e6:10.2f} {lines} {vertices}")
+        print(f"{s.name:22} {s.wall_s:8.1f} {s.cpu_s:8.1f} {s.out_bytes / 1e6:10.2f} {lines} {vertices}".rstrip())
     print(f"ratio ccsm / peer wall time     {ccsm_wall / peer_wall:6.2f}  (goal <= 2)")
     print(f"ratio ccsm / peer CPU time      {ccsm_cpu / peer_cpu:6.2f}")
     print(f"ratio ccsm / peer archive bytes {ccsm_bytes / peer_bytes:6.2f}  (goal <= 1.6)", flush=True)
