@@ -71,15 +71,11 @@ def main() -> None:
     )
     print(f"sample: {n} contours, {nv} vertices, {sum(c.closed for c in cs.contours)} rings")
 
-    build_contour_set(
-        ContourSet(cs.contours[:4], cs.working_crs, cs.source_crs), params, workers=1
-    )  # JIT warm-up
+    build_contour_set(ContourSet(cs.contours[:4], cs.working_crs, cs.source_crs), params, workers=1)  # JIT warm-up
     seconds, built = time_build(cs, params, args.workers)
     surfaces = built.surfaces  # type: ignore[attr-defined]
     print(f"build (surfaces + similarity tables + scale model + crossing repair): {seconds:.2f} s")
-    print(
-        f"  {1000 * seconds / n:.2f} ms per contour, {1000 * seconds / (nv / 1000):.1f} ms per 1,000 input vertices"
-    )
+    print(f"  {1000 * seconds / n:.2f} ms per contour, {1000 * seconds / (nv / 1000):.1f} ms per 1,000 input vertices")
     print(
         f"  built {len(surfaces)}, bad {len(built.bad_features)}, "  # type: ignore[attr-defined]
         f"rebuilt with a finer target so no slices cross: {built.repaired}"  # type: ignore[attr-defined]
@@ -97,13 +93,9 @@ def main() -> None:
     own, children = peak_rss_mb()
     print(f"peak memory: {own:.0f} MB this process, {children:.0f} MB largest worker")
 
-    base = (
-        cs if args.growth_subset <= 0 else dataclasses.replace(cs, contours=cs.contours[: args.growth_subset])
-    )
+    base = cs if args.growth_subset <= 0 else dataclasses.replace(cs, contours=cs.contours[: args.growth_subset])
     print("\nlinear growth" + (f" (first {args.growth_subset} contours)" if args.growth_subset > 0 else ""))
-    print(
-        f"{'copies':>6} {'contours':>9} {'vertices':>9} {'build s':>9} {'ms/contour':>11} {'x time / x data':>16}"
-    )
+    print(f"{'copies':>6} {'contours':>9} {'vertices':>9} {'build s':>9} {'ms/contour':>11} {'x time / x data':>16}")
     first: float | None = None
     for factor in (int(f) for f in args.factors.split(",")):
         data = replicate(base, factor)

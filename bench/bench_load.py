@@ -232,9 +232,7 @@ def run_phase(
         t.start()
     if mix:
         mine, theirs = multiprocessing.Pipe()
-        probe = multiprocessing.get_context("spawn").Process(
-            target=health_probe, args=(base, args.seconds, theirs)
-        )
+        probe = multiprocessing.get_context("spawn").Process(target=health_probe, args=(base, args.seconds, theirs))
         probe.start()
     time.sleep(args.seconds)
     if mix:
@@ -280,9 +278,10 @@ def cpu_by_role(server_pid: int) -> dict[str, float]:
 
 
 def report_cpu(before: dict[str, float], after: dict[str, float], seconds: float) -> None:
-    print("  CPU, cores used on average: " + ", ".join(
-        f"{role} {(after[role] - before.get(role, 0.0)) / seconds:.2f}" for role in sorted(after)
-    ))
+    print(
+        "  CPU, cores used on average: "
+        + ", ".join(f"{role} {(after[role] - before.get(role, 0.0)) / seconds:.2f}" for role in sorted(after))
+    )
 
 
 def pct(values: list[float], q: float) -> float:
@@ -310,12 +309,14 @@ def breakdown(title: str, rec: Record, label: str) -> None:
         return
     rest = rows[:, 0] - rows[:, 1] - rows[:, 2]
     tail = rows[:, 0] >= np.percentile(rows[:, 0], 99)
-    print(f"  {title}, {label} ({len(rows)} drawn): "
-          f"queue p50 {np.percentile(rows[:, 1], 50):.1f} / p99 {np.percentile(rows[:, 1], 99):.1f} ms, "
-          f"render p50 {np.percentile(rows[:, 2], 50):.1f} / p99 {np.percentile(rows[:, 2], 99):.1f} ms, "
-          f"rest p50 {np.percentile(rest, 50):.1f} / p99 {np.percentile(rest, 99):.1f} ms; "
-          f"slowest 1 % ({tail.sum()}): mean total {rows[tail, 0].mean():.1f} = queue {rows[tail, 1].mean():.1f}"
-          f" + render {rows[tail, 2].mean():.1f} + rest {rest[tail].mean():.1f} ms")
+    print(
+        f"  {title}, {label} ({len(rows)} drawn): "
+        f"queue p50 {np.percentile(rows[:, 1], 50):.1f} / p99 {np.percentile(rows[:, 1], 99):.1f} ms, "
+        f"render p50 {np.percentile(rows[:, 2], 50):.1f} / p99 {np.percentile(rows[:, 2], 99):.1f} ms, "
+        f"rest p50 {np.percentile(rest, 50):.1f} / p99 {np.percentile(rest, 99):.1f} ms; "
+        f"slowest 1 % ({tail.sum()}): mean total {rows[tail, 0].mean():.1f} = queue {rows[tail, 1].mean():.1f}"
+        f" + render {rows[tail, 2].mean():.1f} + rest {rest[tail].mean():.1f} ms"
+    )
 
 
 def run_connections(base: str, port: int, tiles: list[tuple[int, int, int]], args: argparse.Namespace) -> None:
@@ -351,15 +352,21 @@ def run_connections(base: str, port: int, tiles: list[tuple[int, int, int]], arg
     print(f"  {'route':30s} {'n':>6s} {'req/s':>7s} {'p50 ms':>8s} {'p99 ms':>8s} {'max ms':>8s}  statuses")
     for label, (lat, codes) in sorted(summarize(samples).items()):
         text = " ".join(f"{k}:{v}" for k, v in sorted(codes.items()))
-        print(f"  {label:30s} {len(lat):6d} {len(lat) / args.seconds:7.1f} {pct(lat, 50):8.1f} {pct(lat, 99):8.1f} "
-              f"{max(lat) * 1000:8.1f}  {text}")
+        print(
+            f"  {label:30s} {len(lat):6d} {len(lat) / args.seconds:7.1f} {pct(lat, 50):8.1f} {pct(lat, 99):8.1f} "
+            f"{max(lat) * 1000:8.1f}  {text}"
+        )
     report_cpu(cpu0, cpu1, args.seconds)
     print(f"  load client process: {client_cpu / args.seconds:.2f} cores")
     for title, values in (("alone", idle), (f"at {args.connections} connections", health)):
-        print(f"/healthz {title}: {len(values)} polls, p50 {pct(values, 50):.1f} ms, p99 {pct(values, 99):.1f} ms, "
-              f"max {max(values) * 1000:.1f} ms")
-    print(f"/healthz loaded / alone: p50 {pct(health, 50) / pct(idle, 50):.1f}x, "
-          f"max {max(health) / max(idle):.1f}x (goal: max <= 50 ms)")
+        print(
+            f"/healthz {title}: {len(values)} polls, p50 {pct(values, 50):.1f} ms, p99 {pct(values, 99):.1f} ms, "
+            f"max {max(values) * 1000:.1f} ms"
+        )
+    print(
+        f"/healthz loaded / alone: p50 {pct(health, 50) / pct(idle, 50):.1f}x, "
+        f"max {max(health) / max(idle):.1f}x (goal: max <= 50 ms)"
+    )
 
 
 def main() -> None:
@@ -369,10 +376,18 @@ def main() -> None:
     parser.add_argument("--hostile", type=int, default=4, help="clients asking expensive requests (mix)")
     parser.add_argument("--workers", type=int, default=1, help="uvicorn worker processes")
     parser.add_argument("--token", default=None, help="admin token: add uploads and deletes to the mix")
-    parser.add_argument("--client-niceness", type=int, default=0,
-                        help="niceness of the load clients' threads (5: as if they ran on other machines)")
-    parser.add_argument("--connections", type=int, default=0,
-                        help="instead: /healthz alone, then during this many open connections (z12 tiles, /datasets)")
+    parser.add_argument(
+        "--client-niceness",
+        type=int,
+        default=0,
+        help="niceness of the load clients' threads (5: as if they ran on other machines)",
+    )
+    parser.add_argument(
+        "--connections",
+        type=int,
+        default=0,
+        help="instead: /healthz alone, then during this many open connections (z12 tiles, /datasets)",
+    )
     args = parser.parse_args()
     store = sample_store()
     server = start(store, args.workers, args.token)
@@ -383,9 +398,11 @@ def main() -> None:
             args.server_pid = server.proc.pid
             run_connections(base, server.port, tiles, args)
             return
-        print(f"server {base}, {args.workers} uvicorn worker(s); {len(tiles)} z12 tiles with contours; "
-              f"{args.clients} plain clients, {args.hostile} hostile clients (niceness {args.client_niceness}), "
-              f"{os.cpu_count()} cores")
+        print(
+            f"server {base}, {args.workers} uvicorn worker(s); {len(tiles)} z12 tiles with contours; "
+            f"{args.clients} plain clients, {args.hostile} hostile clients (niceness {args.client_niceness}), "
+            f"{os.cpu_count()} cores"
+        )
         cpu0 = cpu_by_role(server.proc.pid)
         alone, _, s_alone = run_phase(base, tiles, args, mix=False)
         cpu1 = cpu_by_role(server.proc.pid)
@@ -395,14 +412,17 @@ def main() -> None:
         report("mix: plain tiles + hostile requests", mixed, s_mix)
         report_cpu(cpu1, cpu_by_role(server.proc.pid), s_mix)
         p_alone, p_mix = pct(alone.lat["ccsm z12 tile"], 99), pct(mixed.lat["ccsm z12 tile"], 99)
-        print(f"\nccsm z12 p99: alone {p_alone:.1f} ms, under the mix {p_mix:.1f} ms "
-              f"({p_mix / p_alone:.2f}x; goal <= 2x)")
+        print(
+            f"\nccsm z12 p99: alone {p_alone:.1f} ms, under the mix {p_mix:.1f} ms ({p_mix / p_alone:.2f}x; goal <= 2x)"
+        )
         print("where the plain tiles' time went (Server-Timing):")
         breakdown("alone", alone, "ccsm z12 tile")
         breakdown("mix", mixed, "ccsm z12 tile")
         breakdown("mix", mixed, "morph tile")
-        print(f"/healthz during the mix: {len(health)} polls, max {max(health) * 1000:.1f} ms, "
-              f"p99 {pct(health, 99):.1f} ms (goal < 50 ms)")
+        print(
+            f"/healthz during the mix: {len(health)} polls, max {max(health) * 1000:.1f} ms, "
+            f"p99 {pct(health, 99):.1f} ms (goal < 50 ms)"
+        )
     finally:
         server.stop()
 

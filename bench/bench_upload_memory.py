@@ -63,8 +63,10 @@ def long_line(n: int, seed: int) -> bytes:
     lat = 36.6 + 0.002 * np.cos(a * 1.3) + 1e-5 * rng.standard_normal(n)
     coords = ",".join(f"[{x:.7f},{y:.7f}]" for x, y in zip(lon, lat, strict=True))
     head = json.dumps({"type": "Feature", "properties": {"id": f"long{seed}", "elevation": 400}})[:-1]
-    return (f'{{"type":"FeatureCollection","features":[{head},"geometry":'
-            f'{{"type":"LineString","coordinates":[{coords}]}}}}]}}').encode()
+    return (
+        f'{{"type":"FeatureCollection","features":[{head},"geometry":'
+        f'{{"type":"LineString","coordinates":[{coords}]}}}}]}}'
+    ).encode()
 
 
 def main() -> None:
@@ -75,17 +77,33 @@ def main() -> None:
     args = ap.parse_args()
 
     bodies = [long_line(args.vertices, seed) for seed in range(args.uploads)]
-    print(f"{args.uploads} uploads of {np.mean([len(b) for b in bodies]) / 2**20:.1f} MB "
-          f"({args.vertices} vertices each)")
+    print(
+        f"{args.uploads} uploads of {np.mean([len(b) for b in bodies]) / 2**20:.1f} MB ({args.vertices} vertices each)"
+    )
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     tmp = Path(tempfile.mkdtemp())
-    env = {**os.environ, "CCSM_STORE_PATH": str(tmp / "ccsm.sqlite"), "CCSM_SERVE_SAMPLE": "false",
-           "CCSM_BUILD_QUEUE": str(args.uploads)}
+    env = {
+        **os.environ,
+        "CCSM_STORE_PATH": str(tmp / "ccsm.sqlite"),
+        "CCSM_SERVE_SAMPLE": "false",
+        "CCSM_BUILD_QUEUE": str(args.uploads),
+    }
     server = subprocess.Popen(
-        [sys.executable, "-c", "from app.cli import main; main()", "serve", "--port", str(port),
-         "--log-level", "warning"], cwd=REPO, env=env)
+        [
+            sys.executable,
+            "-c",
+            "from app.cli import main; main()",
+            "serve",
+            "--port",
+            str(port),
+            "--log-level",
+            "warning",
+        ],
+        cwd=REPO,
+        env=env,
+    )
     url = f"http://127.0.0.1:{port}"
     try:
         for _ in range(300):
@@ -109,9 +127,14 @@ def main() -> None:
         sampler.start()
         t0 = time.perf_counter()
         with ThreadPoolExecutor(args.uploads) as pool:
-            answers = list(pool.map(
-                lambda b: httpx.post(url + "/datasets", content=b, timeout=1800,
-                                     headers={"content-type": "application/geo+json"}), bodies))
+            answers = list(
+                pool.map(
+                    lambda b: httpx.post(
+                        url + "/datasets", content=b, timeout=1800, headers={"content-type": "application/geo+json"}
+                    ),
+                    bodies,
+                )
+            )
         accepted = time.perf_counter() - t0
         print("answers:", [r.status_code for r in answers], f"in {accepted:.1f} s")
         ids = [r.json()["id"] for r in answers if r.status_code == 202]
@@ -131,8 +154,10 @@ def main() -> None:
         left = descendants(server.pid)
         print(f"states before delete: {states}")
         print(f"server RSS: baseline {base:.0f} MB, peak {peak['server']:.0f} MB, after {after:.0f} MB")
-        print(f"child processes (upload checks, builds, render workers): peak RSS {peak['builds']:.0f} MB in total, "
-              f"{len(left)} left after delete")
+        print(
+            f"child processes (upload checks, builds, render workers): peak RSS {peak['builds']:.0f} MB in total, "
+            f"{len(left)} left after delete"
+        )
     finally:
         server.terminate()
         server.wait(30)

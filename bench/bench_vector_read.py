@@ -56,8 +56,15 @@ def contour_files(size: int, formats: list[str]) -> list[Path]:
         wkb = np.asarray(shapely.to_wkb([shapely.LineString(xy) for xy in lines]), dtype=object)
         elevations = np.array([c.elevation for c in cs.contours])
         for fmt, path in missing:
-            write(path, wkb, [elevations], ["elevation"], driver=DRIVERS[fmt], crs=cs.working_crs,
-                  geometry_type="LineString")
+            write(
+                path,
+                wkb,
+                [elevations],
+                ["elevation"],
+                driver=DRIVERS[fmt],
+                crs=cs.working_crs,
+                geometry_type="LineString",
+            )
     return paths
 
 
@@ -104,8 +111,10 @@ def main() -> None:
             r = json.loads(out.stdout.strip().splitlines()[-1])
             suffixes = (".shp", ".dbf", ".shx") if path.suffix == ".shp" else (path.suffix,)
             size_mb = sum(path.with_suffix(s).stat().st_size for s in suffixes) / 2**20
-            print(f"{path.name:<28} {size_mb:>6.0f} {mode:<8} {r['contours']:>9} {r['seconds']:>7.1f} "
-                  f"{r['rss_before_mb']:>9.0f}MB {r['peak_mb']:>7.0f}MB")
+            print(
+                f"{path.name:<28} {size_mb:>6.0f} {mode:<8} {r['contours']:>9} {r['seconds']:>7.1f} "
+                f"{r['rss_before_mb']:>9.0f}MB {r['peak_mb']:>7.0f}MB"
+            )
 
 
 if __name__ == "__main__":
