@@ -102,7 +102,7 @@ def contours_from_dem(
     interval
         Contour interval in the DEM's vertical unit; levels are the multiples of it within the data's range.
     tolerances
-        Cleaning distances in metres (see :func:`engine.io.cleaning.assemble_contours`).
+        Cleaning distances in metres (see :func:`engine.io.cleaning.assemble_batches`).
     block
         GeoTIFF / ``.asc`` only: trace in windows of about this many cells a side, joined exactly at their
         edges (:mod:`engine.io.dem_windows`). None: as :func:`~engine.io.dem_windows.window_side` chooses by
