@@ -18,12 +18,12 @@ from typing import TYPE_CHECKING, Annotated, Any, NoReturn
 
 import typer
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import Progress
 from rich.table import Table
 
 from app.cli import app
 from app.cli.contour_issues import issues_phrase, report_contour_issues, report_skipped_features, write_report
-from app.cli.lazy_progress import LazyProgress
+from app.cli.lazy_progress import LazyProgress, progress_bar
 from app.cli.messages import cli_message
 from app.cli.terrain_options import SOURCE_HELP, BboxOption, DemZoomOption, open_source
 from engine.errors import CCSMError
@@ -79,14 +79,7 @@ def output_crs(crs: str, source_crs: str) -> str:
 
 
 def _progress() -> Progress:
-    return Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=err_console,
-        transient=False,
-    )
+    return progress_bar(err_console)
 
 
 def _bad_feature_table(bad: list[BadFeature], limit: int | None = None) -> Table:
@@ -99,7 +92,8 @@ def _bad_feature_table(bad: list[BadFeature], limit: int | None = None) -> Table
     return table
 
 
-#: Build options shared by the commands that build a source into the cache store (simplify, export).
+#: Build options shared by the commands that build a source: into the cache store (simplify, export), and into the
+#: service's store (serve, build: elevation field and interval; their scales default to the service's settings).
 SourceScaleOption = Annotated[float, typer.Option("--source-scale", help="Scale denominator of the input (t = 0).")]
 TargetScaleOption = Annotated[
     float, typer.Option("--target-scale", help="Scale denominator of the CCS's target (t = 1).")
@@ -109,7 +103,12 @@ ElevationFieldOption = Annotated[
     typer.Option("--elevation-field", help="Elevation attribute of a contour file (found by name if omitted)."),
 ]
 IntervalOption = Annotated[
-    float | None, typer.Option("--interval", help="Contour interval of a DEM source, in its vertical unit.")
+    float | None,
+    typer.Option(
+        "--interval",
+        min=0.0,
+        help="Contour interval, in the source's vertical unit [contour files: from their levels; needed for a DEM].",
+    ),
 ]
 
 #: Cartography options of a source (docs/design.md section 9), shared by simplify and export.

@@ -14,15 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
-from rich.progress import (
-    BarColumn,
-    MofNCompleteColumn,
-    Progress,
-    TaskProgressColumn,
-    TextColumn,
-    TimeElapsedColumn,
-    TimeRemainingColumn,
-)
+from rich.progress import Progress
 
 from app.cli import app
 from app.cli.commands_engine import (
@@ -49,7 +41,7 @@ from app.cli.commands_engine import (
     fail,
 )
 from app.cli.contour_issues import issues_phrase, report_contour_issues, report_skipped_features, write_report
-from app.cli.lazy_progress import LazyProgress
+from app.cli.lazy_progress import LazyProgress, progress_bar
 from app.cli.terrain_options import BboxOption, DemZoomOption, names_a_source, open_source
 
 if TYPE_CHECKING:
@@ -57,16 +49,7 @@ if TYPE_CHECKING:
 
 
 def _progress() -> Progress:
-    return Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TaskProgressColumn(),
-        TimeElapsedColumn(),
-        TimeRemainingColumn(),
-        console=err_console,
-        transient=False,
-    )
+    return progress_bar(err_console, time_left=True)
 
 
 def _settings() -> Settings:

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from app.cli import app
+from app.cli.commands_engine import ElevationFieldOption, IntervalOption, ReportOption, check_report
 from app.cli.terrain_options import SOURCE_HELP, BboxOption, DemZoomOption, open_source
 
 if TYPE_CHECKING:
@@ -23,17 +24,6 @@ SourcesArg = Annotated[
 ]
 StoreOpt = Annotated[
     Path | None, typer.Option("--store", help="SQLite store file [env CCSM_STORE_PATH; var/ccsm.sqlite].")
-]
-ElevOpt = Annotated[
-    str | None, typer.Option("--elevation-field", help="Elevation attribute of contour files.")
-]
-IntervalOpt = Annotated[
-    float | None,
-    typer.Option(
-        "--interval",
-        min=0.0,
-        help="Contour interval, in the source's vertical unit [contour files: from their levels; needed for a DEM].",
-    ),
 ]
 SourceScaleOpt = Annotated[
     float | None, typer.Option("--source-scale", help="Scale denominator of the source (t = 0) [50000].")
@@ -55,8 +45,8 @@ def serve(
     port: Annotated[int, typer.Option(help="TCP port.", min=1, max=65535)] = 8000,
     workers: Annotated[int, typer.Option(help="uvicorn worker processes (they share the store).", min=1)] = 1,
     store: StoreOpt = None,
-    elevation_field: ElevOpt = None,
-    interval: IntervalOpt = None,
+    elevation_field: ElevationFieldOption = None,
+    interval: IntervalOption = None,
     bbox: BboxOption = None,
     dem_zoom: DemZoomOption = None,
     source_scale: SourceScaleOpt = None,
@@ -151,8 +141,8 @@ def build(
         str | None, typer.Option("--id", help="Dataset id [from the file name; 'sample'].")
     ] = None,
     name: Annotated[str | None, typer.Option(help="Human name of the dataset.")] = None,
-    elevation_field: ElevOpt = None,
-    interval: IntervalOpt = None,
+    elevation_field: ElevationFieldOption = None,
+    interval: IntervalOption = None,
     bbox: BboxOption = None,
     dem_zoom: DemZoomOption = None,
     source_scale: SourceScaleOpt = None,
@@ -182,21 +172,12 @@ def build(
             "--block", min=2, help="GeoTIFF / .asc: trace in windows of this many cells a side [by size]."
         ),
     ] = None,
-    report: Annotated[
-        Path | None,
-        typer.Option(
-            "--report",
-            help="Write every skipped feature and every contour issue to FILE (.json or .csv); the terminal "
-            "summarises them.",
-            metavar="FILE",
-        ),
-    ] = None,
+    report: ReportOption = None,
 ) -> None:
     """Precompute a source into the store without serving (one transaction: a killed build changes nothing)."""
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from app.cli.lazy_progress import LazyProgress
+    from app.cli.lazy_progress import LazyProgress, progress_bar
     from app.service import SAMPLE_ID, SAMPLE_NAME, build_lock
     from app.settings import Settings
     from engine.build.datasets import SourceSpec, build_dataset, slugify
@@ -204,11 +185,7 @@ def build(
     from engine.store.store import CCSStore
 
     console = Console(stderr=True)
-    from app.cli.run_report import report_problem
-
-    if (problem := report_problem(report)) is not None:
-        console.print(f"[red]error:[/red] {problem}", highlight=False, soft_wrap=True)
-        raise typer.Exit(2)
+    check_report(report)
     if scheduler is not None:
         console.print(f"building on the Dask cluster at {scheduler}")
     settings = Settings()
@@ -239,14 +216,7 @@ def build(
     console.print(f"building {spec.dataset} from {spec.path.name} into {store_path}")
     try:
         ccs_store = CCSStore(store_path)
-        bar = Progress(
-            TextColumn("[bold]{task.description}"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TimeElapsedColumn(),
-            console=console,
-            transient=False,
-        )
+        bar = progress_bar(console, description="[bold]{task.description}")
         with (
             build_lock(store_path),
             LazyProgress(lambda: bar, f"building {spec.dataset}") as progress,  # drawn once the source is read

@@ -1,7 +1,8 @@
-"""A progress bar that appears only once its work's size is known.
+"""The command line's progress bars, and one that appears only once its work's size is known.
 
 A bar started before the input is read draws ``0/?`` and stays on the terminal above the error of a bad
-input; this one starts at the first report that gives a total, which the engine makes once the input is open.
+input; :class:`LazyProgress` starts at the first report that gives a total, which the engine makes once the input
+is open.
 """
 
 from __future__ import annotations
@@ -9,7 +10,30 @@ from __future__ import annotations
 from collections.abc import Callable
 from types import TracebackType
 
-from rich.progress import Progress, TaskID
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    ProgressColumn,
+    TaskID,
+    TaskProgressColumn,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+
+
+def progress_bar(console: Console, *, time_left: bool = False, description: str = "{task.description}") -> Progress:
+    """A bar as every command draws one: what is done, the bar, steps done of the total and the time spent; with
+    ``time_left`` also the share done and the time still to go (for work of many minutes, such as an export)."""
+    columns: list[ProgressColumn] = [TextColumn(description), BarColumn(), MofNCompleteColumn()]
+    if time_left:
+        columns.append(TaskProgressColumn())
+    columns.append(TimeElapsedColumn())
+    if time_left:
+        columns.append(TimeRemainingColumn())
+    return Progress(*columns, console=console, transient=False)
 
 
 class LazyProgress:

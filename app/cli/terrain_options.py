@@ -86,8 +86,8 @@ def open_source(text: str, bbox: str | None, dem_zoom: int | None, source_scale:
         A bad source, area or zoom, or a tile that cannot be had (the message names it).
     """
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    from app.cli.lazy_progress import progress_bar
     from engine.io.source import parse_source
     from engine.io.terrain_tiles import TerrainTiles, prefetch
     from engine.io.tile_fetch import TileCache
@@ -101,9 +101,7 @@ def open_source(text: str, bbox: str | None, dem_zoom: int | None, source_scale:
     )
     if isinstance(source, TerrainTiles):
         console = Console(stderr=True)
-        with Progress(
-            TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), console=console
-        ) as progress:
+        with progress_bar(console) as progress:
             task = progress.add_task("fetching tiles", total=None)
             mosaic = prefetch(source, progress=lambda d, t: progress.update(task, completed=d, total=t))
         console.print(

@@ -188,6 +188,23 @@ def _layer_minzoom(fade: RankFade) -> dict[str, float]:
     return {"minzoom": float(int(fade.hide_zoom))}
 
 
+def _rank_layer_head(fade: RankFade, id_prefix: str, layer_type: str, source_layer: str) -> dict[str, Any]:
+    """What the line and the label layer of one rank have in common: the contour source's features of that rank,
+    none drawn below the rank's hide zoom."""
+    return {
+        "id": f"{id_prefix}-rank-{fade.rank}",
+        "type": layer_type,
+        "source": CONTOUR_SOURCE,
+        "source-layer": source_layer,
+        **_layer_minzoom(fade),
+        "filter": ["==", ["to-number", ["get", "rank"]], fade.rank],
+    }
+
+
+#: MapLibre's test for an index contour (``level`` 1), which is drawn heavier and darker.
+_IS_INDEX = ["==", ["to-number", ["get", "level"]], 1]
+
+
 def line_width(base: RankFade) -> float | list[Any]:
     """Line width as a MapLibre expression: index contours (``level`` 1) at INDEX_LINE_WIDTH_PX while the base
     interval (rank 0, ``base``) is fully drawn, thinning to INDEX_LINE_WIDTH_ALONE_PX as it fades out, with the
@@ -198,28 +215,21 @@ def line_width(base: RankFade) -> float | list[Any]:
     >>> line_width(RankFade(0, 12.0, 10.0))[:4]
     ['interpolate', ['exponential', 2], ['zoom'], 10.0]
     """
-    is_index = ["==", ["to-number", ["get", "level"]], 1]
-    heavy = ["case", is_index, INDEX_LINE_WIDTH_PX, LINE_WIDTH_PX]
+    heavy = ["case", _IS_INDEX, INDEX_LINE_WIDTH_PX, LINE_WIDTH_PX]
     if base.hide_zoom is None:
         return heavy
-    alone = ["case", is_index, INDEX_LINE_WIDTH_ALONE_PX, LINE_WIDTH_PX]
+    alone = ["case", _IS_INDEX, INDEX_LINE_WIDTH_ALONE_PX, LINE_WIDTH_PX]
     return ["interpolate", ["exponential", 2], ["zoom"], base.hide_zoom, alone, base.fade_zoom, heavy]
 
 
 def contour_line_layer(fade: RankFade, base: RankFade | None = None) -> dict[str, Any]:
     """The line layer of one rank: index contours (``level`` 1) heavier and darker than intermediate ones, as
     long as the base interval (``base``, rank 0 of the schedule; default ``fade``) is drawn (:func:`line_width`)."""
-    is_index = ["==", ["to-number", ["get", "level"]], 1]
     return {
-        "id": f"contours-rank-{fade.rank}",
-        "type": "line",
-        "source": CONTOUR_SOURCE,
-        "source-layer": "contours",
-        **_layer_minzoom(fade),
-        "filter": ["==", ["to-number", ["get", "rank"]], fade.rank],
+        **_rank_layer_head(fade, "contours", "line", "contours"),
         "layout": {"line-join": "round", "line-cap": "round"},
         "paint": {
-            "line-color": ["case", is_index, INDEX_LINE_COLOR, LINE_COLOR],
+            "line-color": ["case", _IS_INDEX, INDEX_LINE_COLOR, LINE_COLOR],
             "line-width": line_width(base or fade),
             "line-opacity": fade_opacity(fade),
         },
@@ -249,12 +259,7 @@ def contour_label_layer(fade: RankFade) -> dict[str, Any]:
     """The label layer of one rank: the elevation with its unit, along the line at the tiles' ``angle`` (its top
     toward higher ground, or upright), with a halo."""
     return {
-        "id": f"contour-labels-rank-{fade.rank}",
-        "type": "symbol",
-        "source": CONTOUR_SOURCE,
-        "source-layer": "contour_labels",
-        **_layer_minzoom(fade),
-        "filter": ["==", ["to-number", ["get", "rank"]], fade.rank],
+        **_rank_layer_head(fade, "contour-labels", "symbol", "contour_labels"),
         "layout": {
             "symbol-placement": "point",
             "text-field": ["to-string", ["get", "label"]],

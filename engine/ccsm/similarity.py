@@ -97,7 +97,9 @@ class SimilarityReference:
         return cls(samples=resample_by_arclength(path, n), length_m=length, closed=closed)
 
     def frechet(self, other: Coords) -> float:
-        """Improved Fréchet distance (eq. 8) to ``other`` (same ring convention as the initial contour)."""
+        """The paper's improved Fréchet distance (eq. 8) to ``other`` (same ring convention as the initial
+        contour), metres: ``other`` resampled with as many equally spaced points as the initial contour (a ring
+        from its first vertex round to itself), then the exact discrete Fréchet distance."""
         path = closed_path(other) if self.closed else other
         return discrete_frechet_distance(self.samples, resample_by_arclength(path, len(self.samples)))
 
@@ -170,21 +172,6 @@ def _slice_similarities(samples, length, base, top, ts, out):  # pragma: no cove
             dy = samples[i, 1] - resampled[i, 1]
             bound2 = max(bound2, dx**2 + dy**2)
         out[k] = 1.0 - discrete_frechet(samples, resampled, np.sqrt(bound2)) / length
-
-
-def improved_frechet(
-    initial: Coords,
-    other: Coords,
-    closed: bool,
-    spacing_m: float = DEFAULT_SPACING_M,
-    max_points: int = DEFAULT_MAX_POINTS,
-) -> float:
-    """The paper's improved Fréchet distance (eq. 8) between a contour and a simplified version of it, metres.
-
-    Both are resampled with the same number of equally spaced points (a ring from its first vertex round to
-    itself), then compared with the exact discrete Fréchet distance.
-    """
-    return SimilarityReference.of(initial, closed, spacing_m, max_points).frechet(other)
 
 
 def similarity(

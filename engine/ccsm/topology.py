@@ -38,24 +38,15 @@ SWEEP_PIECE_SEGMENTS = 12
 
 
 def _pieces(lines: Sequence[Coords]) -> tuple[NDArray[np.object_], NDArray[np.intp]]:
-    """Cut every line into pieces of at most PIECE_SEGMENTS segments (neighbouring pieces share a vertex)."""
-    sizes = np.array([len(line) for line in lines], dtype=np.intp)
-    usable = np.flatnonzero(sizes >= 2)
-    if len(usable) == 0:
-        return np.empty(0, dtype=object), np.empty(0, dtype=np.intp)
-    coords = np.concatenate([lines[int(i)] for i in usable])
-    n = sizes[usable]
-    offsets = np.concatenate([[0], np.cumsum(n)[:-1]])
-    per_line = (n - 2) // PIECE_SEGMENTS + 1
-    owner = np.repeat(usable, per_line)
-    k = np.arange(per_line.sum()) - np.repeat(np.cumsum(per_line) - per_line, per_line)
-    first = np.repeat(offsets, per_line) + k * PIECE_SEGMENTS
-    last = np.minimum(first + PIECE_SEGMENTS, np.repeat(offsets + n - 1, per_line))
-    counts = last - first + 1
-    piece_of_point = np.repeat(np.arange(len(first)), counts)
-    point = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts) + np.repeat(first, counts)
-    geoms = shapely.linestrings(coords[point], indices=piece_of_point)
-    return geoms, owner.astype(np.intp)
+    """Cut every line into pieces of at most PIECE_SEGMENTS segments (neighbouring pieces share a vertex): their
+    linestrings and their lines."""
+    first, last, owner = _piece_ranges(lines, PIECE_SEGMENTS)
+    if len(first) == 0:
+        return np.empty(0, dtype=object), owner
+    points, counts = _points_of(first, last)
+    coords = _stacked([np.reshape(line, (-1, 2)) for line in lines])
+    geoms = shapely.linestrings(coords[points], indices=np.repeat(np.arange(len(first)), counts))
+    return geoms, owner
 
 
 def crossing_pairs(lines: Sequence[Coords], only: set[int] | None = None, within: float = 0.0) -> set[tuple[int, int]]:

@@ -75,8 +75,8 @@ class _Checked:
     bounds: tuple[float, float, float, float] | None
 
 
-def assemble_contours(
-    parts: LineParts,
+def assemble_batches(
+    batches: Iterable[LineParts],
     *,
     source_crs: pyproj.CRS,
     where: str,
@@ -85,19 +85,26 @@ def assemble_contours(
     interval: float | None = None,
     scratch: ReadScratch | None = None,
 ) -> ContourSet:
-    """Validate, project and clean line parts into a :class:`ContourSet` (shared by vector and DEM sources).
+    """Validate, project and clean line parts into a :class:`ContourSet` (shared by vector and DEM sources). The
+    parts come in batches (each of about :data:`ASSEMBLE_BATCH_VERTICES` vertices or fewer, :func:`in_batches`),
+    so that a reader never holds the whole source, and the temporary arrays are that size.
 
     Per part, in this order: coordinates must be finite and valid for ``source_crs`` (see
     :func:`engine.io.crs.lonlat_validity`); all vertices are projected to the working CRS in one call; a part
     whose ends lie within ``tolerances.duplicate_m`` is a closed ring and loses its repeated last vertex;
     consecutive vertices closer than ``duplicate_m`` are merged (the first is kept); a line needs 2 distinct
-    vertices, a ring 3, and a length of at least ``tolerances.zero_length_m``. Parts are handled in batches of
-    about :data:`ASSEMBLE_BATCH_VERTICES` vertices (the working CRS is chosen first, from every batch's usable
-    extent), so the temporary arrays are that size whatever the size of the source.
+    vertices, a ring 3, and a length of at least ``tolerances.zero_length_m``.
+
+    Two passes: each batch is checked in the source CRS as it comes, the working CRS is chosen from the
+    extent of every usable part, then each batch is projected and cleaned. With ``scratch``, the checked
+    batches wait in the scratch file between the passes and the contours are kept there too (the set's
+    ``contours`` then read from it when asked, :class:`~engine.scratch.ScratchContours`); without, both
+    stay in memory. Either way the same contours in the same order. Each batch's own ``bad`` (features
+    rejected before it was made) is listed before the reasons found here.
 
     Parameters
     ----------
-    parts
+    batches
         Line parts in ``source_crs``.
     source_crs
         Their CRS.
@@ -110,47 +117,12 @@ def assemble_contours(
     interval
         Contour interval; inferred from the elevations when None.
     scratch
-        Where the contours wait once made (see :func:`assemble_batches`); None = in memory.
-
-    Returns
-    -------
-    ContourSet
+        Where the checked batches and the contours wait (see above); None = in memory.
 
     Raises
     ------
     SourceError
         No part is usable.
-    """
-    return assemble_batches(
-        in_batches(parts),
-        source_crs=source_crs,
-        where=where,
-        name=name,
-        tolerances=tolerances,
-        interval=interval,
-        scratch=scratch,
-    )
-
-
-def assemble_batches(
-    batches: Iterable[LineParts],
-    *,
-    source_crs: pyproj.CRS,
-    where: str,
-    name: str,
-    tolerances: Tolerances = DEFAULT_TOLERANCES,
-    interval: float | None = None,
-    scratch: ReadScratch | None = None,
-) -> ContourSet:
-    """:func:`assemble_contours` of line parts that come in batches (each of about
-    :data:`ASSEMBLE_BATCH_VERTICES` vertices or fewer), so that a reader never holds the whole source.
-
-    Two passes: each batch is checked in the source CRS as it comes, the working CRS is chosen from the
-    extent of every usable part, then each batch is projected and cleaned. With ``scratch``, the checked
-    batches wait in the scratch file between the passes and the contours are kept there too (the set's
-    ``contours`` then read from it when asked, :class:`~engine.scratch.ScratchContours`); without, both
-    stay in memory. Either way the same contours in the same order. Each batch's own ``bad`` (features
-    rejected before it was made) is listed before the reasons found here.
     """
     bad: list[BadFeature] = []
     checked: list[tuple[LineParts, _Checked]] = []
@@ -245,7 +217,7 @@ def _sub_parts(parts: LineParts, a: int, b: int) -> LineParts:
 
 
 def _check_in_source_crs(parts: LineParts, source_crs: pyproj.CRS) -> _Checked:
-    """Steps 1 and 2 of :func:`assemble_contours` for one batch: finite, valid for the CRS, within Web Mercator."""
+    """Steps 1 and 2 of :func:`assemble_batches` for one batch: finite, valid for the CRS, within Web Mercator."""
     n_parts = len(parts.ids)
     counts = np.diff(parts.offsets)
     part_of = np.repeat(np.arange(n_parts), counts)
@@ -285,7 +257,7 @@ def _check_in_source_crs(parts: LineParts, source_crs: pyproj.CRS) -> _Checked:
 def _clean_in_working_crs(
     parts: LineParts, check: _Checked, to_working: Any, working_crs: str, tolerances: Tolerances
 ) -> list[Contour]:
-    """Steps 3 and 4 of :func:`assemble_contours` for one checked batch: projected, rings closed, duplicate
+    """Steps 3 and 4 of :func:`assemble_batches` for one checked batch: projected, rings closed, duplicate
     vertices merged, too short parts left out (their reasons added to ``check.reasons``)."""
     n_parts = len(parts.ids)
     counts = np.diff(parts.offsets)

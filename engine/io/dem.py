@@ -21,7 +21,14 @@ from engine.intervals import UNIT_NAMES
 from engine.io.cleaning import LineParts, assemble_batches, in_batches
 from engine.io.crs import WGS84, parse_crs
 from engine.io.dem_tracing import LevelLines, contour_levels, iter_levels, uphill_side
-from engine.io.dem_windows import DEFAULT_BLOCK, WINDOWED_ABOVE_CELLS, WindowSource, contour_windows, window_side
+from engine.io.dem_windows import (
+    DEFAULT_BLOCK,
+    WINDOWED_ABOVE_CELLS,
+    WindowSource,
+    contour_windows,
+    read_header,
+    window_side,
+)
 from engine.io.raster_windows import RasterDem
 from engine.io.terrain_tiles import TerrainTiles, open_mosaic
 from engine.io.unreadable import unreadable_message
@@ -95,7 +102,7 @@ def contours_from_dem(
     interval
         Contour interval in the DEM's vertical unit; levels are the multiples of it within the data's range.
     tolerances
-        Cleaning distances in metres (see :func:`engine.io.cleaning.assemble_contours`).
+        Cleaning distances in metres (see :func:`engine.io.cleaning.assemble_batches`).
     block
         GeoTIFF / ``.asc`` only: trace in windows of about this many cells a side, joined exactly at their
         edges (:mod:`engine.io.dem_windows`). None: as :func:`~engine.io.dem_windows.window_side` chooses by
@@ -420,25 +427,20 @@ def dem_vertical_units(path: str | os.PathLike[str]) -> str | None:
     path = Path(path)
     if path.suffix.lower() in NPZ_SUFFIXES:
         return None
-    try:
-        with rasterio.open(path) as src:
-            band_unit = (src.units or (None,))[0]
-            wkt = src.crs.to_wkt() if src.crs is not None else None
-    except RasterioError as exc:
-        raise SourceError(unreadable_message(path, "a DEM", exc)) from exc
-    if band_unit and band_unit.strip().lower() in UNIT_NAMES:
-        return UNIT_NAMES[band_unit.strip().lower()]
-    if wkt:
-        crs = pyproj.CRS.from_wkt(wkt)
-        vertical = [c for c in crs.sub_crs_list if c.is_vertical] if crs.is_compound else []
-        if vertical and vertical[0].axis_info:
-            return UNIT_NAMES.get(vertical[0].axis_info[0].unit_name.strip().lower())
+    header = read_header(path)
+    band_unit = (header.band_unit or "").strip().lower()
+    if band_unit in UNIT_NAMES:
+        return UNIT_NAMES[band_unit]
+    crs = pyproj.CRS.from_wkt(header.crs_wkt)
+    vertical = [c for c in crs.sub_crs_list if c.is_vertical] if crs.is_compound else []
+    if vertical and vertical[0].axis_info:
+        return UNIT_NAMES.get(vertical[0].axis_info[0].unit_name.strip().lower())
     return None
 
 
 def dem_uphill_side(path: str | os.PathLike[str]) -> str:
     """The side ("left" or "right") every contour traced from the DEM at ``path`` has higher ground on
-    (:func:`~engine.io.dem_tracing.uphill_side` of its geotransform).
+    (:func:`~engine.io.dem_tracing.uphill_side` of its geotransform; an ``.npz`` grid's is known once read).
 
     Raises
     ------
@@ -446,14 +448,8 @@ def dem_uphill_side(path: str | os.PathLike[str]) -> str:
         The DEM cannot be read.
     """
     path = Path(path)
-    if path.suffix.lower() in NPZ_SUFFIXES:
-        return uphill_side(read_dem(path).transform)
-    try:
-        with rasterio.open(path) as src:
-            t = src.transform
-    except RasterioError as exc:
-        raise SourceError(f"{path}: cannot read DEM ({exc})") from exc
-    return uphill_side((t.a, t.b, t.c, t.d, t.e, t.f))
+    npz = path.suffix.lower() in NPZ_SUFFIXES
+    return uphill_side(read_dem(path).transform if npz else read_header(path).transform)
 
 
 #: The geotransform's turning sense of every terrain tile mosaic: Web Mercator, north up, rows running south

@@ -49,13 +49,14 @@ JOIN_TOLERANCE_PX = 1e-6
 
 @dataclass(frozen=True)
 class RasterHeader:
-    """What the windowed reader needs to know of a raster before reading any height."""
+    """What the windowed reader needs to know of a raster before reading any height, and the band's unit."""
 
     rows: int
     cols: int
     transform: tuple[float, float, float, float, float, float]
     crs_wkt: str
     tile_shape: tuple[int, int] | None  # internal tiles (rows, cols) of a tiled GeoTIFF, else None
+    band_unit: str | None = None  # GDAL's ``units`` of band 1, when the raster states one
 
 
 class WindowSource(Protocol):
@@ -78,7 +79,7 @@ class WindowSource(Protocol):
 
 
 def read_header(path: Path) -> RasterHeader:
-    """Size, geotransform, CRS and internal tiling of a raster.
+    """Size, geotransform, CRS, internal tiling and band unit of a raster.
 
     Raises
     ------
@@ -98,6 +99,7 @@ def read_header(path: Path) -> RasterHeader:
                 transform=(t.a, t.b, t.c, t.d, t.e, t.f),
                 crs_wkt=src.crs.to_wkt(),
                 tile_shape=tuple(src.block_shapes[0]) if tiled else None,  # type: ignore[arg-type]
+                band_unit=(src.units or (None,))[0],
             )
     except RasterioError as exc:
         raise SourceError(unreadable_message(path, "a DEM", exc)) from exc

@@ -210,31 +210,29 @@ def read_source(
     >>> cs.working_crs, len(cs.contours)
     ('EPSG:32616', 1830)
     """
+    dem: Path | RasterDem | TerrainTiles
     if isinstance(path, (RasterDem, TerrainTiles)):
-        if interval is None:
-            raise InvalidParameter(f"{path.name}: a DEM needs a contour interval (interval=...)")
-        return contours_from_dem(
-            path, interval=interval, tolerances=tolerances, block=block, executor=executor, scratch=scratch
-        )
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix in VECTOR_SUFFIXES:
-        contour_set = read_contours(
-            path, elevation_field=elevation_field, layer=layer, tolerances=tolerances, scratch=scratch
-        )
-        if interval is not None:
-            contour_set.interval = float(interval)
-        return contour_set
-    if suffix in DEM_SUFFIXES:
+        dem, name = path, path.name
+    else:
+        path = Path(path)
+        suffix = path.suffix.lower()
+        if suffix in VECTOR_SUFFIXES:
+            contour_set = read_contours(
+                path, elevation_field=elevation_field, layer=layer, tolerances=tolerances, scratch=scratch
+            )
+            if interval is not None:
+                contour_set.interval = float(interval)
+            return contour_set
         if not path.exists():
             raise SourceError(f"{path}: file not found")
-        if interval is None:
-            raise InvalidParameter(f"{path}: a DEM needs a contour interval", parameter="interval")
-        return contours_from_dem(
-            path, interval=interval, tolerances=tolerances, block=block, executor=executor, scratch=scratch
-        )
-    if not path.exists():
-        raise SourceError(f"{path}: file not found")
-    raise SourceError(
-        f"{path}: unknown format {path.suffix or '(no extension)'!r}; expected one of {', '.join(SUPPORTED_SUFFIXES)}"
+        if suffix not in DEM_SUFFIXES:
+            raise SourceError(
+                f"{path}: unknown format {path.suffix or '(no extension)'!r}; expected one of "
+                f"{', '.join(SUPPORTED_SUFFIXES)}"
+            )
+        dem, name = path, str(path)
+    if interval is None:
+        raise InvalidParameter(f"{name}: a DEM needs a contour interval", parameter="interval")
+    return contours_from_dem(
+        dem, interval=interval, tolerances=tolerances, block=block, executor=executor, scratch=scratch
     )

@@ -78,14 +78,18 @@ def _fill(template: str, ref: TileRef) -> str:
 
 
 @dataclass(frozen=True)
-class UrlTemplate:
-    """Tiles at ``https://host/{z}/{x}/{y}.png``."""
+class _Template:
+    """Tiles each at its own place, the template's ``{z}``, ``{x}`` and ``{y}`` filled in."""
 
     template: str
 
     def where(self, ref: TileRef) -> str:
-        """The tile's URL."""
+        """The tile's URL or file."""
         return _fill(self.template, ref)
+
+
+class UrlTemplate(_Template):
+    """Tiles at ``https://host/{z}/{x}/{y}.png``."""
 
     def get(self, ref: TileRef) -> bytes:
         """The tile's bytes, tried :data:`TRIES` times when the network fails or the server is busy."""
@@ -93,15 +97,8 @@ class UrlTemplate:
         return http_get(url, f"tile {ref.z}/{ref.x}/{ref.y} ({url})")
 
 
-@dataclass(frozen=True)
-class FolderTemplate:
+class FolderTemplate(_Template):
     """Tiles in files at ``/path/{z}/{x}/{y}.png``."""
-
-    template: str
-
-    def where(self, ref: TileRef) -> str:
-        """The tile's file."""
-        return _fill(self.template, ref)
 
     def get(self, ref: TileRef) -> bytes:
         """The tile file's bytes."""
@@ -115,8 +112,8 @@ class FolderTemplate:
 
 
 @dataclass(frozen=True)
-class PMTilesArchive:
-    """Tiles in a PMTiles v3 archive, a local file or a URL read by HTTP range requests."""
+class _TileArchive:
+    """A single file holding a pyramid's tiles: every tile is looked for in it, so messages name the archive."""
 
     location: str
 
@@ -124,12 +121,19 @@ class PMTilesArchive:
         """The archive."""
         return self.location
 
+    def _label(self, ref: TileRef) -> str:
+        return f"tile {ref.z}/{ref.x}/{ref.y} ({self.location})"
+
+
+class PMTilesArchive(_TileArchive):
+    """Tiles in a PMTiles v3 archive, a local file or a URL read by HTTP range requests."""
+
     def get(self, ref: TileRef) -> bytes:
         """The tile's bytes from the archive (decompressed when the archive says they are gzipped)."""
         from pmtiles.reader import Reader
         from pmtiles.tile import Compression
 
-        label = f"tile {ref.z}/{ref.x}/{ref.y} ({self.location})"
+        label = self._label(ref)
         try:
             reader = Reader(_archive_bytes(self.location, label))
             data = reader.get(ref.z, ref.x, ref.y)
@@ -164,19 +168,12 @@ def _archive_bytes(location: str, label: str) -> Callable[[int, int], bytes]:
     return read_range
 
 
-@dataclass(frozen=True)
-class MBTilesArchive:
+class MBTilesArchive(_TileArchive):
     """Tiles in an MBTiles (SQLite) file; its rows count from the south (TMS)."""
-
-    location: str
-
-    def where(self, ref: TileRef) -> str:
-        """The archive."""
-        return self.location
 
     def get(self, ref: TileRef) -> bytes:
         """The tile's bytes from the archive."""
-        label = f"tile {ref.z}/{ref.x}/{ref.y} ({self.location})"
+        label = self._label(ref)
         path = _local_path(self.location)
         if not path.is_file():
             raise SourceError(f"{label}: no such MBTiles file")

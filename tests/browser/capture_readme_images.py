@@ -1,7 +1,7 @@
 """Make the README's screenshot and morph animation (docs/img/web-*.png, docs/img/morph.gif).
 
 Run against a running service:  python tests/browser/capture_readme_images.py http://127.0.0.1:8000
-Not a test (pytest does not collect it); it reuses the browser settings of chromium_launch.py.
+Not a test (pytest does not collect it); it opens its page as chromium_launch.py does.
 """
 
 from __future__ import annotations
@@ -12,10 +12,9 @@ import time
 from pathlib import Path
 
 from PIL import Image
-from playwright.sync_api import sync_playwright
 
 sys.path.insert(0, str(Path(__file__).parent))
-from chromium_launch import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
+from chromium_launch import page_at  # noqa: E402
 
 OUT = Path(__file__).resolve().parents[2] / "docs" / "img"
 
@@ -32,11 +31,8 @@ def settle(page, timeout_s: float = 60) -> None:
 
 def main(base: str) -> None:
     OUT.mkdir(parents=True, exist_ok=True)
-    with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        page = browser.new_page(viewport={"width": 1100, "height": 700})
-        page.goto(f"{base}/#map=10.6/36.585/-84.26")
-        page.wait_for_function("() => window.ccsm && window.ccsm.state.tilejson", timeout=60_000)
+    ready = "() => window.ccsm && window.ccsm.state.tilejson"
+    with page_at(f"{base}/#map=10.6/36.585/-84.26", 1100, 700, ready, timeout_ms=60_000) as page:
         settle(page)
         page.screenshot(path=str(OUT / "web-map.png"))
 
@@ -68,7 +64,6 @@ def main(base: str) -> None:
         for i, k in enumerate([0, 4, 8, 12]):
             strip.paste(frames[k].convert("RGB"), (i * w, 0))
         strip.save(OUT / "morph-strip.png", optimize=True)
-        browser.close()
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 MapLibre (web/clients/maplibre.html), hillshade on, 1000 x 700 px.
 
 Run against a running service:  python tests/browser/capture_scale_images.py http://127.0.0.1:8000
-Not a test (pytest does not collect it); it reuses the browser settings of chromium_launch.py.
+Not a test (pytest does not collect it); it opens its page as chromium_launch.py does.
 """
 
 from __future__ import annotations
@@ -11,11 +11,10 @@ import sys
 from pathlib import Path
 
 import httpx
-from playwright.sync_api import sync_playwright
 
 sys.path.insert(0, str(Path(__file__).parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-from chromium_launch import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
+from chromium_launch import page_at  # noqa: E402
 
 from engine.tiles.scale import zoom_for_scale  # noqa: E402
 
@@ -33,23 +32,26 @@ SETTLE_JS = """() => new Promise((resolve) => {
 })"""
 
 
+def sample_views(base: str, names: dict[int, str]) -> list[tuple[int, str, list[float], float]]:
+    """(scale, file name, centre, zoom) of each picture of the sample: 1:50,000 at DETAIL_CENTRE, the other
+    scales at the centre of the sample's bounds."""
+    w, s, e, n = httpx.get(f"{base}/tiles/sample/tilejson.json", timeout=60).json()["bounds"]
+    views = []
+    for scale, name in names.items():
+        lon, lat = DETAIL_CENTRE if scale == 50_000 else ((w + e) / 2, (s + n) / 2)
+        views.append((scale, name, [lon, lat], float(zoom_for_scale(scale, lat))))
+    return views
+
+
 def main(base: str) -> None:
     OUT.mkdir(parents=True, exist_ok=True)
-    w, s, e, n = httpx.get(f"{base}/tiles/sample/tilejson.json", timeout=60).json()["bounds"]
-    centre = ((w + e) / 2, (s + n) / 2)
-    with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        page = browser.new_page(viewport={"width": 1000, "height": 700})
-        page.goto(f"{base}/web/clients/maplibre.html?dataset=sample")
-        page.wait_for_function("() => window.clientMap && clientMap.loaded()", timeout=120_000)
-        for scale, name in SCALES.items():
-            lon, lat = DETAIL_CENTRE if scale == 50_000 else centre
-            zoom = float(zoom_for_scale(scale, lat))
-            page.evaluate("([c, z]) => clientMap.jumpTo({center: c, zoom: z})", [[lon, lat], zoom])
+    url = f"{base}/web/clients/maplibre.html?dataset=sample"
+    with page_at(url, 1000, 700, "() => window.clientMap && clientMap.loaded()") as page:
+        for scale, name, centre, zoom in sample_views(base, SCALES):
+            page.evaluate("([c, z]) => clientMap.jumpTo({center: c, zoom: z})", [centre, zoom])
             page.evaluate(SETTLE_JS)
             page.screenshot(path=str(OUT / name), timeout=60_000)
             print(f"1:{scale:,} (zoom {zoom:.2f}) -> docs/img/{name}")
-        browser.close()
 
 
 if __name__ == "__main__":

@@ -12,16 +12,12 @@ import io
 import sys
 from pathlib import Path
 
-import httpx
 from PIL import Image
-from playwright.sync_api import sync_playwright
 
 sys.path.insert(0, str(Path(__file__).parent))
 from capture_readme_images import settle  # noqa: E402
-from capture_scale_images import DETAIL_CENTRE, OUT  # noqa: E402  (puts the repository on the path too)
-from chromium_launch import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
-
-from engine.tiles.scale import zoom_for_scale  # noqa: E402
+from capture_scale_images import OUT, sample_views  # noqa: E402  (puts the repository on the path too)
+from chromium_launch import page_at  # noqa: E402
 
 #: Scale denominator -> file name (1:50,000 at DETAIL_CENTRE, the others at the sample's centre).
 SPLIT_IMAGES = {50_000: "split-50k.png", 250_000: "split-250k.png", 1_000_000: "split-1m.png"}
@@ -37,21 +33,14 @@ def save_small(png: bytes, path: Path) -> None:
 
 def main(base: str, out: Path = OUT) -> None:
     out.mkdir(parents=True, exist_ok=True)
-    w, s, e, n = httpx.get(f"{base}/tiles/sample/tilejson.json", timeout=60).json()["bounds"]
-    with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        page = browser.new_page(viewport={"width": 1000, "height": 560})
-        page.goto(f"{base}/?dataset=sample&view=split&compare=dp")
-        page.wait_for_function("() => window.ccsm && window.ccsm.state.tilejson", timeout=120_000)
-        for scale, name in SPLIT_IMAGES.items():
-            lon, lat = DETAIL_CENTRE if scale == 50_000 else ((w + e) / 2, (s + n) / 2)
-            zoom = float(zoom_for_scale(scale, lat))
-            page.evaluate("([c, z]) => window.ccsm.maps.a.jumpTo({center: c, zoom: z})", [[lon, lat], zoom])
+    url = f"{base}/?dataset=sample&view=split&compare=dp"
+    with page_at(url, 1000, 560, "() => window.ccsm && window.ccsm.state.tilejson") as page:
+        for scale, name, centre, zoom in sample_views(base, SPLIT_IMAGES):
+            page.evaluate("([c, z]) => window.ccsm.maps.a.jumpTo({center: c, zoom: z})", [centre, zoom])
             settle(page, 120)
             page.wait_for_timeout(LABEL_FADE_MS)
             save_small(page.screenshot(timeout=60_000), out / name)
             print(f"1:{scale:,} (zoom {zoom:.2f}) -> {out / name}")
-        browser.close()
 
 
 if __name__ == "__main__":

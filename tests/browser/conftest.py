@@ -127,6 +127,20 @@ def service_stopped(url: str) -> Iterator[bool]:
         os.kill(proc.pid, signal.SIGCONT)
 
 
+def watched_page(context: Any, *, console_errors: bool = False) -> tuple[Any, list[str], list[str]]:
+    """A new page of ``context``, every URL it asks for, and its errors (uncaught exceptions, failed requests and,
+    with ``console_errors``, console.error lines): what a page served without the service is checked by."""
+    page = context.new_page()
+    requests: list[str] = []
+    errors: list[str] = []
+    page.on("request", lambda r: requests.append(r.url))
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    page.on("requestfailed", lambda r: errors.append(f"{r.url} {r.failure}"))
+    if console_errors:
+        page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    return page, requests, errors
+
+
 def BROWSER_SERVICE_ENV(tmp: Path) -> dict[str, str]:  # noqa: N802  (a table, read like a constant)
     """Settings for the service under test: its own store in tmp, a small dataset so it is ready in seconds."""
     return {

@@ -21,7 +21,7 @@ from typing import Any
 import httpx
 import numpy as np
 import pytest
-from conftest import REPO, SERVICE_STORES, service_stopped
+from conftest import REPO, SERVICE_STORES, service_stopped, watched_page
 from morph_probe import wheel_through_level
 from PIL import Image
 from static_server import RangeServer, serve_static
@@ -136,13 +136,7 @@ def test_exported_folder_draws_the_services_map_without_the_service(
     assert any(s.get("type") == "raster" for s in style["sources"].values()), "the sample has a DEM: hillshade"
     context = browser.new_context(viewport=size)
     context.set_default_timeout(30_000)
-    page = context.new_page()
-    requests: list[str] = []
-    errors: list[str] = []
-    page.on("request", lambda r: requests.append(r.url))
-    page.on("pageerror", lambda exc: errors.append(str(exc)))
-    page.on("requestfailed", lambda r: errors.append(f"{r.url} {r.failure}"))
-    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    page, requests, errors = watched_page(context, console_errors=True)
     try:
         with service_stopped(service_url):
             page.goto(f"{static_map.url}/index.html")

@@ -17,7 +17,7 @@ from typing import Any
 
 import httpx
 import pytest
-from conftest import REPO, SERVICE_STORES, service_stopped
+from conftest import REPO, SERVICE_STORES, service_stopped, watched_page
 from maplibre_versions import PAGE_MAPLIBRE, install_maplibre, installed_version, peer_range, versions_in_range
 from morph_pmtiles import morph_pmtiles_from_service
 from morph_probe import install_probe, read_probe, wheel_through_level
@@ -150,12 +150,7 @@ def static_site(
 
 def test_static_pmtiles_without_the_service(browser, service_url, static_site, morph_archive):
     context = browser.new_context(viewport=SMALL)
-    page = context.new_page()
-    requests: list[str] = []
-    errors: list[str] = []
-    page.on("request", lambda r: requests.append(r.url))
-    page.on("pageerror", lambda exc: errors.append(str(exc)))
-    page.on("requestfailed", lambda r: errors.append(f"{r.url} {r.failure}"))
+    page, requests, errors = watched_page(context)
     try:
         with service_stopped(service_url):
             page.goto(f"{static_site.url}/web/plugin/example/index.html?url=pmtiles:///data/{morph_archive.name}")

@@ -16,7 +16,6 @@ from engine.ccsm.ccs import build_ccs
 from engine.ccsm.similarity import (
     SimilarityReference,
     discrete_frechet_distance,
-    improved_frechet,
     resample_count,
     similarity,
 )
@@ -135,7 +134,7 @@ def test_improved_frechet_is_the_distance_after_equal_count_resampling() -> None
     # L0 = straight 100 m; L = the same segment with an extra middle vertex: identical after resampling.
     l0 = np.array([[0.0, 0.0], [100.0, 0.0]])
     other = np.array([[0.0, 0.0], [50.0, 0.0], [100.0, 0.0]])
-    assert improved_frechet(l0, other, closed=False, spacing_m=10.0) == pytest.approx(0.0, abs=1e-9)
+    assert SimilarityReference.of(l0, closed=False, spacing_m=10.0).frechet(other) == pytest.approx(0.0, abs=1e-9)
 
 
 @pytest.mark.parametrize(
