@@ -94,11 +94,13 @@ FRAMES_JS = """async ([start, end, ms]) => {
     let on = true;
     const tick = (t) => { ts.push(t); if (on) requestAnimationFrame(tick); };
     requestAnimationFrame(tick);
+    const swaps0 = window.contours ? window.contours.swaps : 0;
     map.easeTo({zoom: end, duration: ms, easing: (t) => t});
     await new Promise((r) => map.once('moveend', r));
     on = false;
+    const steps = window.contours ? window.contours.swaps - swaps0 : 0;
     const d = ts.slice(1).map((t, i) => t - ts[i]).sort((a, b) => a - b);
-    return {frames: d.length, median: d[d.length >> 1], p90: d[Math.floor(d.length * 0.9)]};
+    return {frames: d.length, median: d[d.length >> 1], p90: d[Math.floor(d.length * 0.9)], steps};
 }"""
 
 PLAIN_JS = """([template, minzoom, maxzoom]) => {
@@ -110,13 +112,18 @@ PLAIN_JS = """([template, minzoom, maxzoom]) => {
 }"""
 
 
-def frame_times(browser: Any, url: str, centre: list[float], plain: bool, tilejson: dict[str, Any]) -> dict[str, float]:
+def frame_times(
+    browser: Any, url: str, centre: list[float], share: float | None, tilejson: dict[str, Any]
+) -> dict[str, float]:
+    """Frame times through the level: plain MapLibre (``share`` None) or the plugin with that ``loadShare``."""
     context = browser.new_context(viewport=VIEWPORT)
     page = context.new_page()
     page.goto(f"{url}/web/plugin/example/index.html?url={tilejson['_url']}")
     page.wait_for_function("() => window.contours && window.contours.settled", timeout=120_000)
     page.evaluate("(c) => map.jumpTo({center: c})", centre)
-    if plain:
+    if share is not None:
+        page.evaluate("(s) => { contours.loadShare = s; }", share)
+    else:
         page.evaluate(PLAIN_JS, [tilejson["tiles"][0], tilejson.get("minzoom", 0), tilejson.get("maxzoom", 16)])
     page.wait_for_function("() => window.contours ? window.contours.settled : map.loaded()", timeout=120_000)
     # One warm-up pass (tiles of the level fetched and parsed), then the measured one.
@@ -130,6 +137,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--base-url", help="a running ccsm service (default: start one)")
     ap.add_argument("--runs", type=int, default=3, help="alternating frame-time runs per variant")
+    ap.add_argument(
+        "--load-shares",
+        default="0.333",
+        help="comma-separated loadShare values of the plugin to time (its default 1/3; 1: steps back to back)",
+    )
     args = ap.parse_args()
     from playwright.sync_api import sync_playwright
 
@@ -149,17 +161,22 @@ def main() -> None:
         print(f"   plugin (morph tiles, 32 steps per level):   {p_arrive:3d} + {plugin:3d}")
         print(f"   eighth-swap (per-level tiles, 8 per level): {e_arrive:3d} + {eighth:3d}")
 
-        runs: dict[str, list[dict[str, float]]] = {"plain": [], "plugin": []}
+        variants: dict[str, float | None] = {"plain": None}
+        variants.update({f"plugin, loadShare {s}": float(s) for s in args.load_shares.split(",")})
+        runs: dict[str, list[dict[str, float]]] = {name: [] for name in variants}
         for _ in range(args.runs):
-            for name in ("plain", "plugin"):
-                runs[name].append(frame_times(browser, url, centre, name == "plain", tilejson))
+            for name, share in variants.items():
+                runs[name].append(frame_times(browser, url, centre, share, tilejson))
         med = {k: statistics.median(r["median"] for r in v) for k, v in runs.items()}
         print(f"2. frame time while zooming {START} -> {END} in {EASE_MS} ms (median of {args.runs} runs' medians)")
-        for name in ("plain", "plugin"):
+        for name, share in variants.items():
             frames = [int(r["frames"]) for r in runs[name]]
             p90 = statistics.median(r["p90"] for r in runs[name])
-            print(f"   {name:7s} {med[name]:7.1f} ms  (p90 {p90:.1f} ms, frames per run {frames})")
-        print(f"   ratio plugin / plain: {med['plugin'] / med['plain']:.2f}  (goal <= 1.2)")
+            steps = "" if share is None else f", morph steps drawn per run {[int(r['steps']) for r in runs[name]]} of 31"
+            print(f"   {name:20s} {med[name]:7.1f} ms  (p90 {p90:.1f} ms, frames per run {frames}{steps})")
+        for name, share in variants.items():
+            if share is not None:
+                print(f"   ratio {name} / plain: {med[name] / med['plain']:.2f}  (goal <= 1.2)")
         browser.close()
 
 

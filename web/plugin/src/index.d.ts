@@ -143,6 +143,13 @@ export interface AddToOptions {
   beforeId?: string;
   onChange?: (state: MorphLayerState) => void;
   onError?: (message: string) => void;
+  /**
+   * At most this share of the time goes to loading morph steps (0 < loadShare <= 1, default 1/3): after a swap
+   * the next step waits until the last load took at most this share of the time since it began. 1: no pause.
+   */
+  loadShare?: number;
+  /** The clock in ms (default `performance.now`); for tests. */
+  now?: () => number;
 }
 
 /** The part of the maplibre-gl module `setupMaplibre` needs (`import * as maplibregl from 'maplibre-gl'`). */

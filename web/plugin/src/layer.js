@@ -7,6 +7,12 @@
 // A load is never interrupted: a long gesture shows the steps it can keep up with, each one complete. The
 // hidden buffer gets a new step only when it is idle, because MapLibre finishes a tile that is loading when
 // its URL changes with the old URL's data.
+//
+// Every step loads the view's tiles again (MapLibre parses and lays out each one), and that work takes the
+// cores the map's own drawing needs: on a slow machine back-to-back steps halve the frame rate. So after a
+// swap the next step waits until the last load's time is at most `loadShare` of the time since that load
+// began: on a fast machine (loads of a few ms) that is no wait, on a slow one the morph shows fewer, still
+// whole, steps and the map keeps its frame rate.
 
 import {stepIndex} from './tinterp.js';
 
@@ -24,10 +30,17 @@ export class MorphLayer {
    * @param {import('./index.js').CcsmMorph} morph
    * @param {import('maplibre-gl').Map} map
    * @param {{id?: string, layers: object[], beforeId?: string, onChange?: (state: object) => void,
-   *          onError?: (message: string) => void}} options
+   *          onError?: (message: string) => void, loadShare?: number, now?: () => number}} options
+   *   loadShare: at most this share of the time goes to loading steps (0 < loadShare <= 1; 1: no pause);
+   *   now: the clock in ms (tests)
    */
-  constructor(morph, map, {id = 'ccsm-morph', layers, beforeId, onChange, onError} = {}) {
+  constructor(
+    morph,
+    map,
+    {id = 'ccsm-morph', layers, beforeId, onChange, onError, loadShare = 1 / 3, now} = {},
+  ) {
     if (!Array.isArray(layers) || !layers.length) throw new Error('ccsm-morph: addTo needs `layers`, the style layers to draw');
+    if (!(loadShare > 0 && loadShare <= 1)) throw new Error(`ccsm-morph: loadShare must be in (0, 1], got ${loadShare}`);
     this.morph = morph;
     this.map = map;
     this.id = id;
@@ -42,6 +55,10 @@ export class MorphLayer {
     this.swaps = 0;
     this.override = null;
     this.removed = false;
+    this.loadShare = loadShare;
+    this.now = now ?? (() => globalThis.performance.now());
+    this.nextStepAt = -Infinity; // the clock's time from which a new step may start loading
+    this._wakeTimer = null;
     this._handlers = {
       render: () => this._tick(),
       sourcedata: (e) => {
@@ -107,6 +124,7 @@ export class MorphLayer {
 
   remove() {
     this.removed = true;
+    clearTimeout(this._wakeTimer);
     for (const [name, fn] of Object.entries(this._handlers)) this.map.off(name, fn);
     for (const b of this.buffers) this._removeBuffer(b);
     this.buffers = [];
@@ -191,6 +209,17 @@ export class MorphLayer {
     }
     const want = this.desiredStep();
     if (this.active.step === want) return;
+    const wait = this.nextStepAt - this.now();
+    if (wait > 0) {
+      // The camera may stop meanwhile (no more render events): come back when the pause is over.
+      if (this._wakeTimer === null) {
+        this._wakeTimer = setTimeout(() => {
+          this._wakeTimer = null;
+          if (!this.removed) this.map.triggerRepaint();
+        }, wait);
+      }
+      return;
+    }
     let hidden = this.buffers.find((b) => b !== this.active);
     if (!hidden) {
       hidden = this._addBuffer('b', want, false);
@@ -201,6 +230,7 @@ export class MorphLayer {
     }
     hidden.sawTile = false;
     hidden.renders = 0;
+    hidden.loadStartedAt = this.now();
     this.pending = hidden;
     this.onChange(this.state());
   }
@@ -213,6 +243,9 @@ export class MorphLayer {
     this.active = next;
     this.pending = null;
     this.swaps += 1;
+    const now = this.now();
+    const loadMs = now - next.loadStartedAt;
+    this.nextStepAt = now + (loadMs * (1 - this.loadShare)) / this.loadShare;
     this.onChange(this.state());
     this.map.triggerRepaint();
   }
