@@ -24,7 +24,7 @@ from engine.build.records import contour_rows, dataset_meta
 from engine.cartography.dataset import UPHILL_SIDE_KEY
 from engine.cartography.options import PARAMS_KEY, CartographyOptions, check_schedule_fits
 from engine.cartography.units import source_units
-from engine.ccsm.build import BuiltSet, SpooledSet, build_into
+from engine.ccsm.build import BuiltSet, SpooledSet, build_into, build_pool
 from engine.ccsm.ccs import CCS
 from engine.ccsm.spool import surface_of
 from engine.io.dem import DEM_SUFFIXES, source_uphill_side
@@ -225,21 +225,22 @@ def build_and_save(
     # The surfaces wait in a scratch file beside the store, not in memory (docs/design.md section 6).
     spool = DiskSpool(Path(store.path).parent)
     try:
-        built = build_into(spool, contour_set, build_params, workers=workers, progress=progress, executor=executor)
-        if still_wanted is not None and not still_wanted():
-            return None
-        return save_built(
-            store,
-            dataset,
-            built,
-            name=name,
-            source=source,
-            digest=digest,
-            params=params,
-            build_seconds=time.perf_counter() - started,
-            only_if_building=only_if_building,
-            executor=executor,
-        )
+        with build_pool(executor, workers, len(contour_set.contours)) as pool:
+            built = build_into(spool, contour_set, build_params, workers=workers, progress=progress, executor=pool)
+            if still_wanted is not None and not still_wanted():
+                return None
+            return save_built(
+                store,
+                dataset,
+                built,
+                name=name,
+                source=source,
+                digest=digest,
+                params=params,
+                build_seconds=time.perf_counter() - started,
+                only_if_building=only_if_building,
+                executor=pool,
+            )
     finally:
         spool.close()
 

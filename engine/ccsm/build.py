@@ -121,6 +121,17 @@ def _pool(executor: Executor | None, workers: int, chunks: int) -> AbstractConte
     return local_pool(workers)
 
 
+def build_pool(
+    executor: Executor | None, workers: int | None, contours: int
+) -> AbstractContextManager[Executor | None]:
+    """The executor for the whole of a build of ``contours`` contours and its save: the given one, else a local
+    pool of ``workers`` processes (None: one per core) when there is more than one chunk of work, else None
+    (this process). Opened once by the caller, so that the store rows and label candidates of the save run on
+    the same processes as the build, not serially in the process that writes the store."""
+    workers = default_workers() if workers is None else max(1, workers)
+    return _pool(executor, workers, -(-contours // CHUNK))
+
+
 def default_workers() -> int:
     """Worker processes: one per core the process may use."""
     try:
