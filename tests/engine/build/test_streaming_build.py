@@ -165,6 +165,34 @@ def test_rows_and_label_candidates_made_on_an_executor_are_stored_as_made_in_the
     assert theirs.anchors.text == mine.anchors.text
 
 
+class RecordingPool(RecordingExecutor):
+    """A :class:`RecordingExecutor` that shuts its pool down with it, as the build's own pool is."""
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:  # noqa: D102
+        self.inner.shutdown(wait=wait, cancel_futures=cancel_futures)
+
+
+def test_a_local_build_makes_its_rows_and_label_candidates_on_its_own_pool(tmp_path, monkeypatch) -> None:
+    # ccsm build --workers 2 with no cluster: the pool it opens must last to the labels, or the rows and the
+    # candidates run serially in the build process while the workers wait.
+    import engine.ccsm.build as ccsm_build
+
+    pools: list[RecordingPool] = []
+
+    def recording_pool(workers: int) -> RecordingPool:
+        pools.append(RecordingPool(local_pool(workers)))
+        return pools[-1]
+
+    monkeypatch.setattr(ccsm_build, "local_pool", recording_pool)
+    z = fractal_heights(11, 3.0, n=64, relief_m=200.0).astype(np.float32)
+    dem = write_geotiff(tmp_path / "t.tif", z, west=740_000.0, north=4_060_000.0, cell=30.0, crs="EPSG:32616")
+    build_dataset(CCSStore(tmp_path / "s.sqlite"), SourceSpec(dem, "t", "t", interval=10.0), workers=2)
+    assert len(pools) == 1, "one pool for the whole build"
+    ran = pools[0].ran
+    assert ran.count("_build_chunk") > 1, ran
+    assert ran.count("batch_rows") > 1 and ran.count("batch_candidates") > 1, ran
+
+
 def test_a_failing_build_removes_its_scratch_file_and_keeps_the_stored_version(
     tmp_path, clusters_source, monkeypatch
 ) -> None:
