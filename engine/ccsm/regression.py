@@ -138,9 +138,9 @@ def group_features(contours: Sequence[Contour]) -> NDArray[np.float64]:
 
 
 def assign_groups(
-    contours: Sequence[Contour], n_groups: int, seed: int = 0
+    contours: Sequence[Contour], n_groups: int, seed: int = 0, feats: NDArray[np.float64] | None = None
 ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """Group contours by size and shape.
+    """Group contours by size and shape (``feats``: their :func:`group_features`, when already computed).
 
     Returns
     -------
@@ -149,7 +149,7 @@ def assign_groups(
     references
         (g,) index of each group's reference contour (the member nearest the group's centre).
     """
-    feats = group_features(contours)
+    feats = group_features(contours) if feats is None else feats
     k = int(min(max(n_groups, 1), len(contours)))
     scaled = (feats - feats.mean(axis=0)) / np.maximum(feats.std(axis=0), 1e-12)
     if k == 1:
@@ -169,10 +169,15 @@ def assign_groups(
 
 
 def reference_sets(
-    contours: Sequence[Contour], labels: NDArray[np.intp], references: NDArray[np.intp], per_group: int
+    contours: Sequence[Contour],
+    labels: NDArray[np.intp],
+    references: NDArray[np.intp],
+    per_group: int,
+    feats: NDArray[np.float64] | None = None,
 ) -> list[list[Contour]]:
-    """Up to ``per_group`` members of each group nearest its reference contour in size and shape."""
-    feats = group_features(contours)
+    """Up to ``per_group`` members of each group nearest its reference contour in size and shape (``feats``:
+    their :func:`group_features`, when already computed)."""
+    feats = group_features(contours) if feats is None else feats
     scaled = (feats - feats.mean(axis=0)) / np.maximum(feats.std(axis=0), 1e-12)
     sets: list[list[Contour]] = []
     for g, ref in enumerate(references):
@@ -239,9 +244,11 @@ def fit_scale_model(contours: Sequence[Contour], params: BuildParams) -> tuple[S
         return ScaleModel(params.source_scale, params.target_scale, ladder, ()), np.zeros(
             len(contours), np.intp
         )
-    labels, references = assign_groups(contours, params.groups)
+    # Once for both steps: it reads every contour, from the scratch file on a big build.
+    feats = group_features(contours)
+    labels, references = assign_groups(contours, params.groups, feats=feats)
     groups = []
-    for members in reference_sets(contours, labels, references, REFERENCES_PER_GROUP):
+    for members in reference_sets(contours, labels, references, REFERENCES_PER_GROUP, feats):
         if not members:
             groups.append(GroupModel(None, None, np.zeros(0), np.zeros(0)))
         else:

@@ -220,3 +220,24 @@ def test_each_group_keeps_its_own_ladder_share_when_groups_alternate() -> None:
     flat = np.ones(5)  # a Sim table with no loss: the t table is the group's share itself
     for group in (0, 1, 0, 1, 7):
         assert_allclose(model.t_table(group, np.linspace(0, 1, 5), flat), model.loss_share(group, LADDER), atol=0)
+
+
+def test_fitting_the_scale_model_reads_each_contour_once_besides_the_references() -> None:
+    # A big build's contours wait in a scratch file and each read unpickles one: the size-and-shape features
+    # are found once for the grouping and the choice of references, not once for each.
+    from engine.ccsm.regression import REFERENCES_PER_GROUP
+
+    class CountingContours(list):
+        reads = 0
+
+        def __getitem__(self, i):  # noqa: ANN001, ANN204 - list's
+            CountingContours.reads += 1
+            return super().__getitem__(i)
+
+        def __iter__(self):  # noqa: ANN204 - list's
+            return (self[i] for i in range(len(self)))
+
+    contours = CountingContours(synthetic_contours(40))
+    params = BuildParams()
+    fit_scale_model(contours, params)
+    assert 40 <= CountingContours.reads <= 40 + params.groups * REFERENCES_PER_GROUP
