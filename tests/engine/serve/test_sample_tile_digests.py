@@ -20,11 +20,18 @@ pytestmark = pytest.mark.slow
 
 #: ``bench/tile_digests.py`` at 91ff931 (before the moves): 888 tiles. Recorded again when the sample's labels (a
 #: contour file) began to read uphill by their neighbouring levels (issue 25): only label angles changed, since
-#: with ``label_orientation="upright"`` the tiles still give f26da31f...7eb684. Recorded again on 2026-12-06 on a
-#: fresh install (the suite's own environment: the same code, the project's dependencies as pip resolves them
-#: today) where the same code gives other bytes: ebe861...a5b259a0c366, upright 2eba10f5...6292e9. The digest
-#: guards a refactor within one environment; a dependency release may move it, and then it is recorded again.
-RECORDED = (888, "ebe861c72ab74b8f41c7dd7ffdf3e7e93e63ebdb7187777a56b4a5b259a0c366")
+#: with ``label_orientation="upright"`` the tiles still give f26da31f...7eb684.
+#:
+#: The same code gives other bytes on other machines and installs: on 2026-12-06's fresh install ebe861...
+#: (upright 2eba10f5...6292e9), on 2026-12-07's (an AMD EPYC without AVX-512, the dependencies as pip resolved
+#: them that day) d92ac0... with the code of both days. Neither numba's target CPU (NUMBA_CPU_NAME=generic) nor
+#: numpy's SIMD level changed it, so the floating point of a dependency moved a few coordinates across a
+#: rounding step. The test guards a refactor: the tiles must be one of the recorded environments' exactly; a
+#: change of the code that alters any tile gives a digest none of them has.
+RECORDED = {
+    (888, "ebe861c72ab74b8f41c7dd7ffdf3e7e93e63ebdb7187777a56b4a5b259a0c366"),
+    (888, "d92ac078207c4e0e1c3f91c366b4eb6a0deec52c863697423392c17ef7b6647c"),
+}
 
 
 @pytest.fixture(scope="module")
@@ -35,4 +42,4 @@ def sample_renderer(tmp_path_factory: pytest.TempPathFactory) -> Renderer:
 
 
 def test_issue_23_sample_tiles_are_byte_for_byte_those_before_the_moves(sample_renderer: Renderer) -> None:
-    assert total_digest(tile_digests(sample_renderer, "sample")) == RECORDED
+    assert total_digest(tile_digests(sample_renderer, "sample")) in RECORDED
