@@ -172,7 +172,8 @@ def main() -> None:
         for name, share in variants.items():
             frames = [int(r["frames"]) for r in runs[name]]
             p90 = statistics.median(r["p90"] for r in runs[name])
-            steps = "" if share is None else f", morph steps drawn per run {[int(r['steps']) for r in runs[name]]} of 31"
+            drawn = [int(r["steps"]) for r in runs[name]]
+            steps = "" if share is None else f", morph steps drawn per run {drawn} of 31"
             print(f"   {name:20s} {med[name]:7.1f} ms  (p90 {p90:.1f} ms, frames per run {frames}{steps})")
         for name, share in variants.items():
             if share is not None:
