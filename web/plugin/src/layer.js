@@ -9,12 +9,16 @@
 // its URL changes with the old URL's data.
 //
 // Every step loads the view's tiles again (MapLibre parses and lays out each one), and that work takes the
-// cores the map's own drawing needs: on a slow machine back-to-back steps halve the frame rate. So after a
-// swap the next step waits until the last load's time is at most `loadShare` of the time since that load
-// began: on a fast machine (loads of a few ms) that is no wait, on a slow one the morph shows fewer, still
-// whole, steps and the map keeps its frame rate.
+// cores the map's own drawing needs: on a slow machine back-to-back steps halve the frame rate. So a new step
+// starts loading only while the loads of the last LOAD_WINDOW_MS took at most `loadShare` of it: a gesture
+// from rest gets its first steps back to back (a short wheel or pinch morphs through them), a long one is
+// paced to that share. On a fast machine (loads of a few ms) nothing ever waits; on a slow one the morph shows
+// fewer, still whole, steps and the map keeps its frame rate.
 
 import {stepIndex} from './tinterp.js';
+
+/** The window over which loads may take at most `loadShare` of the time. */
+export const LOAD_WINDOW_MS = 3000;
 
 const OPACITY = {
   line: ['line-opacity'],
@@ -57,7 +61,7 @@ export class MorphLayer {
     this.removed = false;
     this.loadShare = loadShare;
     this.now = now ?? (() => globalThis.performance.now());
-    this.nextStepAt = -Infinity; // the clock's time from which a new step may start loading
+    this.loads = []; // {start, end} of the recent steps' loads, by the clock
     this._wakeTimer = null;
     this._handlers = {
       render: () => this._tick(),
@@ -209,7 +213,7 @@ export class MorphLayer {
     }
     const want = this.desiredStep();
     if (this.active.step === want) return;
-    const wait = this.nextStepAt - this.now();
+    const wait = this._loadWait(this.now());
     if (wait > 0) {
       // The camera may stop meanwhile (no more render events): come back when the pause is over.
       if (this._wakeTimer === null) {
@@ -235,6 +239,26 @@ export class MorphLayer {
     this.onChange(this.state());
   }
 
+  /** Milliseconds until the loads of the last LOAD_WINDOW_MS take at most `loadShare` of it (0: now). */
+  _loadWait(now) {
+    this.loads = this.loads.filter((l) => l.end > now - LOAD_WINDOW_MS);
+    const budget = this.loadShare * LOAD_WINDOW_MS;
+    // Time spent loading inside the window that ends `later` ms from now (no new load meanwhile).
+    const used = (later) => {
+      const from = now + later - LOAD_WINDOW_MS;
+      return this.loads.reduce((sum, l) => sum + Math.max(0, l.end - Math.max(l.start, from)), 0);
+    };
+    if (used(0) <= budget) return 0;
+    let lo = 0;
+    let hi = LOAD_WINDOW_MS; // by then every recorded load has left the window
+    while (hi - lo > 1) {
+      const mid = (lo + hi) / 2;
+      if (used(mid) <= budget) hi = mid;
+      else lo = mid;
+    }
+    return hi;
+  }
+
   _swap() {
     const next = this.pending;
     const old = this.active;
@@ -243,9 +267,7 @@ export class MorphLayer {
     this.active = next;
     this.pending = null;
     this.swaps += 1;
-    const now = this.now();
-    const loadMs = now - next.loadStartedAt;
-    this.nextStepAt = now + (loadMs * (1 - this.loadShare)) / this.loadShare;
+    if (Number.isFinite(next.loadStartedAt)) this.loads.push({start: next.loadStartedAt, end: this.now()});
     this.onChange(this.state());
     this.map.triggerRepaint();
   }

@@ -1,9 +1,9 @@
-// MorphLayer's pacing of step loads (layer.js): after a swap the next step waits until the last load took at
-// most `loadShare` of the time, and a camera that stops during the pause still gets its step. A map stand-in
+// MorphLayer's pacing of step loads (layer.js): a step starts loading only while the loads of the last 3 s
+// took at most `loadShare` of it, and a camera that stops during the pause still gets its step. A map stand-in
 // records what the layer asks of MapLibre; the clock is the test's.
 import assert from 'node:assert/strict';
 import {test} from 'node:test';
-import {MorphLayer} from '../src/layer.js';
+import {LOAD_WINDOW_MS, MorphLayer} from '../src/layer.js';
 
 class StandInMap {
   constructor(zoom) {
@@ -81,53 +81,55 @@ function finishLoad(map, clock, layer, ms) {
   map.fire('render');
 }
 
-test('after a swap the next step waits until loads are at most loadShare of the time', async () => {
-  const {map, clock, layer} = await layerAt(11, 0.2);
+/** Ask for the next step (the camera moved on by one) and report whether its load started. */
+function nextStepStarts(map, layer) {
+  map.zoom += 1 / 32;
+  map.fire('render');
+  return layer.pending !== null;
+}
+
+test('steps load back to back until the loads of the last 3 s took loadShare of it, then wait', async () => {
+  const {map, clock, layer} = await layerAt(11, 0.2); // 600 ms of loads per 3,000 ms window
+  assert.equal(LOAD_WINDOW_MS, 3000);
   assert.equal(layer.shownZoom, 11);
-  map.zoom = 11 + 1 / 32;
-  map.fire('render');
-  assert.equal(layer.pending.step, 11 * 32 + 1, 'the first step starts at once');
-  finishLoad(map, clock, layer, 100);
-  assert.equal(layer.shownZoom, 11 + 1 / 32);
-  map.zoom = 11 + 2 / 32;
-  const loadsBefore = map.setTilesCalls.length + Object.keys(map.sources).length;
-  for (const ms of [1, 100, 200, 399]) {
-    clock.ms = 100 + ms;
-    map.fire('render');
-    assert.equal(layer.pending, null, `no new load ${ms} ms after a 100 ms load (0.2 share: 400 ms pause)`);
+  for (let k = 1; k <= 3; k++) {
+    assert.ok(nextStepStarts(map, layer), `step ${k} starts at once (${(k - 1) * 250} ms of loads so far)`);
+    finishLoad(map, clock, layer, 250);
+    assert.equal(layer.shownZoom, 11 + k / 32);
   }
-  assert.equal(map.setTilesCalls.length + Object.keys(map.sources).length, loadsBefore);
+  // 750 ms of loads in the window: the next waits until the window holds 600, when [0, 150] has left it.
+  map.zoom += 1 / 32;
+  for (const t of [750, 1500, 3000, 3140]) {
+    clock.ms = t;
+    map.fire('render');
+    assert.equal(layer.pending, null, `no new load at ${t} ms`);
+  }
   assert.equal(layer.settled, false, 'not settled while the camera asks for another step');
-  clock.ms = 100 + 400;
+  clock.ms = 3152;
   map.fire('render');
-  assert.equal(layer.pending.step, 11 * 32 + 2, 'the next step loads once the pause is over');
+  assert.equal(layer.pending.step, 11 * 32 + 4, 'the next step loads once the window allows it');
 });
 
-test('loadShare 1 loads the next step at once', async () => {
+test('loadShare 1 never waits', async () => {
   const {map, clock, layer} = await layerAt(11, 1);
-  map.zoom = 11 + 1 / 32;
-  map.fire('render');
-  finishLoad(map, clock, layer, 100);
-  map.zoom = 11 + 2 / 32;
-  map.fire('render');
-  assert.equal(layer.pending.step, 11 * 32 + 2);
+  for (let k = 1; k <= 6; k++) {
+    assert.ok(nextStepStarts(map, layer), `step ${k}`);
+    finishLoad(map, clock, layer, 1000);
+  }
 });
 
 test('a camera that stops during the pause gets its step: the layer asks for a frame when the pause ends', async (t) => {
   t.mock.timers.enable({apis: ['setTimeout']});
-  const {map, clock, layer} = await layerAt(11, 0.5);
-  map.zoom = 11 + 1 / 32;
-  map.fire('render');
-  finishLoad(map, clock, layer, 50);
-  map.zoom = 11 + 2 / 32; // the camera's last move: no render event after this one
-  map.fire('render');
-  assert.equal(layer.pending, null, 'paused (50 ms after a 50 ms load at share 0.5)');
+  const {map, clock, layer} = await layerAt(11, 0.5); // 1,500 ms of loads per window
+  assert.ok(nextStepStarts(map, layer));
+  finishLoad(map, clock, layer, 2000);
+  assert.ok(!nextStepStarts(map, layer), 'paused: 2,000 ms of loads in the window'); // the camera's last move
   const repaints = map.repaints;
-  t.mock.timers.tick(49);
-  assert.equal(map.repaints, repaints, 'not before the pause ends');
-  t.mock.timers.tick(1);
+  t.mock.timers.tick(1490);
+  assert.equal(map.repaints, repaints, 'not before the pause ends (1,500 ms: [0, 500] out of the window)');
+  t.mock.timers.tick(12);
   assert.equal(map.repaints, repaints + 1, 'a frame is asked for when the pause ends');
-  clock.ms += 50;
+  clock.ms += 1502;
   map.fire('render');
   assert.equal(layer.pending.step, 11 * 32 + 2);
   layer.remove();
