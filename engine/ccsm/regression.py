@@ -173,11 +173,10 @@ def reference_sets(
     labels: NDArray[np.intp],
     references: NDArray[np.intp],
     per_group: int,
-    feats: NDArray[np.float64] | None = None,
+    feats: NDArray[np.float64],
 ) -> list[list[Contour]]:
     """Up to ``per_group`` members of each group nearest its reference contour in size and shape (``feats``:
-    their :func:`group_features`, when already computed)."""
-    feats = group_features(contours) if feats is None else feats
+    their :func:`group_features`, as the grouping used)."""
     scaled = (feats - feats.mean(axis=0)) / np.maximum(feats.std(axis=0), 1e-12)
     sets: list[list[Contour]] = []
     for g, ref in enumerate(references):

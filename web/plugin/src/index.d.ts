@@ -144,8 +144,8 @@ export interface AddToOptions {
   onChange?: (state: MorphLayerState) => void;
   onError?: (message: string) => void;
   /**
-   * At most this share of the time goes to loading morph steps (0 < loadShare <= 1, default 1/3): after a swap
-   * the next step waits until the last load took at most this share of the time since it began. 1: no pause.
+   * At most this share of the time goes to loading morph steps (0 < loadShare <= 1, default 1/3): a step starts
+   * loading only while the loads of the last 3 s took at most this share of them. 1: no pause.
    */
   loadShare?: number;
   /** The clock in ms (default `performance.now`); for tests. */

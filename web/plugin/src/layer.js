@@ -241,22 +241,19 @@ export class MorphLayer {
 
   /** Milliseconds until the loads of the last LOAD_WINDOW_MS take at most `loadShare` of it (0: now). */
   _loadWait(now) {
-    this.loads = this.loads.filter((l) => l.end > now - LOAD_WINDOW_MS);
-    const budget = this.loadShare * LOAD_WINDOW_MS;
-    // Time spent loading inside the window that ends `later` ms from now (no new load meanwhile).
-    const used = (later) => {
-      const from = now + later - LOAD_WINDOW_MS;
-      return this.loads.reduce((sum, l) => sum + Math.max(0, l.end - Math.max(l.start, from)), 0);
-    };
-    if (used(0) <= budget) return 0;
-    let lo = 0;
-    let hi = LOAD_WINDOW_MS; // by then every recorded load has left the window
-    while (hi - lo > 1) {
-      const mid = (lo + hi) / 2;
-      if (used(mid) <= budget) hi = mid;
-      else lo = mid;
+    const from = now - LOAD_WINDOW_MS;
+    this.loads = this.loads.filter((l) => l.end > from);
+    // The loads follow one another (one step loads at a time), oldest first: as the window's start moves on,
+    // it drops their time in that order, so the wait is where it has dropped the excess over the budget.
+    const used = this.loads.reduce((sum, l) => sum + l.end - Math.max(l.start, from), 0);
+    let excess = used - this.loadShare * LOAD_WINDOW_MS;
+    for (const l of this.loads) {
+      if (excess <= 0) break;
+      const start = Math.max(l.start, from);
+      if (excess <= l.end - start) return start + excess - from;
+      excess -= l.end - start;
     }
-    return hi;
+    return 0;
   }
 
   _swap() {
