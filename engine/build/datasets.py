@@ -32,8 +32,9 @@ from engine.io.source import Source, read_source, source_file
 from engine.parallel import map_ordered
 from engine.params import BuildParams
 from engine.scratch import DiskSpool, ReadScratch
-from engine.store.records import DatasetInfo, NewContour
+from engine.store.records import DatasetInfo
 from engine.store.schema import STORE_FORMAT
+from engine.store.shard import Shard, write_shard
 from engine.store.store import CCSStore
 from engine.types import Contour, ContourSet
 
@@ -262,38 +263,37 @@ def save_built(
     maximum zoom, :mod:`engine.build.labels`).
 
     Rows are made batch by batch (:data:`SAVE_BATCH` contours) on ``executor`` (None: in this process) and
-    written as they come back, in order, in the store's bounded write transactions (:meth:`CCSStore.save`), so
-    the rows of only a few batches are in memory at a time and no other write waits on the build. The label
-    candidates are found on ``executor`` too: the build process is left with the writing, so that the save,
-    like the build, goes faster with more workers.
+    written there into shards (:mod:`engine.store.shard`), which are merged as they come back, in order, in the
+    store's bounded write transactions (:meth:`CCSStore.save`), so only a few shards are in memory at a time
+    and no other write waits on the build. The label candidates are found on ``executor`` too: the build
+    process is left with merging, so that the save, like the build, goes faster with more workers.
     """
     meta = dataset_meta(
         built, name=name, source=source, source_hash=digest, params=params, build_seconds=build_seconds
     )
-    rows = _rows_in_batches(built, executor)
+    shards = _shards_in_batches(built, executor)
     labels = label_placer(store, executor=executor)
-    return store.save(dataset, meta, rows, only_if_building=only_if_building, labels=labels)
+    return store.save(dataset, meta, shards, only_if_building=only_if_building, labels=labels)
 
 
-#: Contours whose store rows are made by one task while a built set is written.
+#: Contours whose store rows are made, and written into one shard, by one task while a built set is written.
 SAVE_BATCH = 256
 
-#: Row tasks in flight while a built set is written: each worker busy, few batches of rows held.
+#: Shard tasks in flight while a built set is written: each worker busy, few shards held.
 SAVE_AHEAD = 4
 
 
-def _rows_in_batches(built: BuiltSet | SpooledSet, executor: Executor | None = None) -> Iterator[NewContour]:
-    """The store rows of ``built``, made :data:`SAVE_BATCH` surfaces at a time on ``executor`` (a spooled set
-    reads only those batches of surfaces, as the spool keeps them, and of input contours)."""
+def _shards_in_batches(built: BuiltSet | SpooledSet, executor: Executor | None = None) -> Iterator[Shard]:
+    """The store rows of ``built`` as shards of :data:`SAVE_BATCH` surfaces, written on ``executor`` (a spooled
+    set reads only those batches of surfaces, as the spool keeps them, and of input contours)."""
     tasks = ((payloads, built.working_crs, inputs) for payloads, inputs in built.payloads_in_batches(SAVE_BATCH))
-    for rows in map_ordered(executor, batch_rows, tasks, SAVE_AHEAD):
-        yield from rows
+    yield from map_ordered(executor, batch_shard, tasks, SAVE_AHEAD)
 
 
-def batch_rows(payloads: Sequence[CCS | bytes], working_crs: str, inputs: Sequence[Contour]) -> list[NewContour]:
-    """The store rows of one batch of surfaces as the spool keeps them (:func:`contour_rows`): a task of a
-    worker, which opens the surfaces itself."""
-    return contour_rows([surface_of(p) for p in payloads], working_crs, inputs)
+def batch_shard(payloads: Sequence[CCS | bytes], working_crs: str, inputs: Sequence[Contour]) -> Shard:
+    """One batch of surfaces as the spool keeps them, made into store rows (:func:`contour_rows`) and written
+    into a shard: a task of a worker, which opens the surfaces itself, so the build process only merges."""
+    return write_shard(contour_rows([surface_of(p) for p in payloads], working_crs, inputs))
 
 
 def build_dataset(

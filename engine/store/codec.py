@@ -182,6 +182,13 @@ class RowTally:
         minx, maxx, miny, maxy = c.box
         self.box = [min(self.box[0], minx), min(self.box[1], miny), max(self.box[2], maxx), max(self.box[3], maxy)]
 
+    def merge(self, other: RowTally) -> None:
+        """Count another tally's contours too."""
+        self.n += other.n
+        self.closed += other.closed
+        self.vertices += other.vertices
+        self.box = [*map(min, self.box[:2], other.box[:2]), *map(max, self.box[2:], other.box[2:])]
+
     def bounds(self) -> tuple[float, float, float, float]:
         """(minx, miny, maxx, maxy) of every row, zeros when there is none."""
         return (0.0, 0.0, 0.0, 0.0) if self.n == 0 else (self.box[0], self.box[1], self.box[2], self.box[3])

@@ -34,9 +34,7 @@ from engine.store.codec import (
     LABEL_COLUMNS,
     RowTally,
     contour_head,
-    contour_pieces,
     contour_record,
-    contour_row,
     dataset_info,
     dataset_row,
     label_row,
@@ -50,12 +48,12 @@ from engine.store.records import (
     ContourRecord,
     DatasetInfo,
     LabelPlacer,
-    NewContour,
     NewDataset,
     StoredLabels,
     StoredPieces,
 )
 from engine.store.schema import PIECE_KINDS
+from engine.store.shard import Shard, attached, fid_runs, merge_run
 from engine.store.staging import (
     is_private,
     leftover_ids,
@@ -132,7 +130,7 @@ class CCSStore(BuildBook):
         self,
         dataset: str,
         meta: NewDataset,
-        contours: Iterable[NewContour],
+        shards: Iterable[Shard],
         progress: Callable[[int, int], None] | None = None,
         *,
         only_if_building: bool = False,
@@ -140,22 +138,23 @@ class CCSStore(BuildBook):
     ) -> DatasetInfo:
         """Write a dataset, replacing any previous version: staged in bounded transactions, then one switch.
 
-        The rows are written as ``contours`` yields them (a generator keeps only one batch in memory), a batch
-        of at most :data:`STAGE_CONTOURS` contours or :data:`STAGE_ROWS` rows per transaction, under the
-        dataset's staged id (:mod:`engine.store.staging`): other writes wait at most one batch, readers see
-        nothing of it. The dataset's row goes in last; ``labels``, when given, is called with the staged id (its
-        rows and row are readable under it) and returns the anchors. The switch is one short transaction: the
-        old version's rows retired, the staged ones renamed to the dataset, its row, labels and new
-        ``data_version`` in; the retired rows are then removed a few at a time. An exception (or a killed
-        process) before the switch leaves the previous version as it was and its staged rows to be removed.
-        With ``only_if_building`` every transaction checks that the dataset's build is still recorded, the
-        switch too, so a dataset deleted during its build never comes back: BuildCancelled is raised instead.
-        ``progress`` gets (rows written, rows known so far).
+        The rows come in shards (:mod:`engine.store.shard`, written where the rows were made) and are merged as
+        ``shards`` yields them (a generator keeps only a few in memory), at most :data:`STAGE_CONTOURS`
+        contours or :data:`STAGE_ROWS` rows per transaction, under the dataset's staged id
+        (:mod:`engine.store.staging`): other writes wait at most one such step, readers see nothing of it. The
+        dataset's row goes in last; ``labels``, when given, is called with the staged id (its rows and row are
+        readable under it) and returns the anchors. The switch is one short transaction: the old version's rows
+        retired, the staged ones renamed to the dataset, its row, labels and new ``data_version`` in; the
+        retired rows are then removed a few at a time. An exception (or a killed process) before the switch
+        leaves the previous version as it was and its staged rows to be removed. With ``only_if_building``
+        every transaction checks that the dataset's build is still recorded, the switch too, so a dataset
+        deleted during its build never comes back: BuildCancelled is raised instead. ``progress`` gets
+        (contours written, contours written).
         """
         stage = staged_id(dataset)
         self.purge(stage)  # what a killed build of this id left
         try:
-            counts = self._stage_rows(dataset, stage, contours, progress, only_if_building)
+            counts = self._stage_shards(dataset, stage, shards, progress, only_if_building)
             with self._write() as cur:
                 self._check_building(cur, dataset, only_if_building)
                 cur.execute(
@@ -177,50 +176,26 @@ class CCSStore(BuildBook):
         if only_if_building and not is_building(cur, dataset):
             raise BuildCancelled(f"dataset {dataset!r} was deleted while it built")
 
-    def _stage_rows(
+    def _stage_shards(
         self,
         dataset: str,
         stage: str,
-        contours: Iterable[NewContour],
+        shards: Iterable[Shard],
         progress: Callable[[int, int], None] | None,
         only_if_building: bool,
     ) -> RowTally:
-        """Write the rows under ``stage``, a bounded batch per transaction (made outside it)."""
+        """Merge the shards' rows under ``stage``, a bounded run of contours per transaction."""
         counts = RowTally()
-        batch: list[NewContour] = []
-        rows = 0
-        for c in chain(contours, [None]):
-            if c is not None:
-                batch.append(c)
-                rows += len(c.base)
-            if batch and (c is None or len(batch) >= STAGE_CONTOURS or rows >= STAGE_ROWS):
-                with self._write() as cur:
-                    self._check_building(cur, dataset, only_if_building)
-                    for each in batch:
-                        self._insert_contour(cur, stage, each)
-                for each in batch:
-                    counts.add(each)
-                batch, rows = [], 0
-                if progress:
-                    progress(counts.n, counts.n)
+        for shard in shards:
+            with attached(self._con(), shard) as contours:
+                for first, last in fid_runs(contours, STAGE_CONTOURS, STAGE_ROWS):
+                    with self._write() as cur:
+                        self._check_building(cur, dataset, only_if_building)
+                        merge_run(cur, stage, first, last)
+            counts.merge(shard.tally)
+            if progress:
+                progress(counts.n, counts.n)
         return counts
-
-    @staticmethod
-    def _insert_contour(cur: sqlite3.Cursor, stage: str, c: NewContour) -> None:
-        cur.execute(
-            "INSERT INTO contours(dataset, contour_id, elevation, closed, grp, vanish_scale, "
-            "length_m, n_rows, n_input, base, top, original, original_w, t_at_scale, sim_t, sim, sig, "
-            "sig_top, sig_original) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
-            contour_row(stage, c),
-        )
-        fid = cur.lastrowid
-        cur.execute("INSERT INTO contour_rtree VALUES (?,?,?,?,?,?)", (fid, *c.box, stage))
-        if c.issues:
-            insert_issues(cur, stage, int(fid or 0), c.issues)
-        for kind, k, blobs, box in contour_pieces(c):
-            marks = ",".join("?" * len(blobs))
-            cur.execute(f"INSERT INTO {kind}_pieces VALUES (NULL,?,?,{marks})", (fid, k, *blobs))
-            cur.execute(f"INSERT INTO {kind}_piece_rtree VALUES (?,?,?,?,?,?)", (cur.lastrowid, *box, stage))
 
     @classmethod
     def _switch(cls, cur: sqlite3.Cursor, dataset: str, stage: str, placed: StoredLabels | None) -> None:

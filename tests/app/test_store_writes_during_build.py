@@ -133,7 +133,7 @@ def test_a_build_out_of_disk_says_so(client, tmp_path, monkeypatch):
     def no_room(*a, **k):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(store_module.CCSStore, "_insert_contour", staticmethod(no_room))
+    monkeypatch.setattr(store_module, "merge_run", no_room)
     source = write_geojson(tmp_path / "full.geojson", synthetic_features(seed=5))
     assert build_job.run(_upload_job(store, "full", source)) == 1
     status = CCSStore(store).build_statuses()["full"]

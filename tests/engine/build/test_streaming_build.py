@@ -156,7 +156,7 @@ def test_rows_and_label_candidates_made_on_an_executor_are_stored_as_made_in_the
         executor = RecordingExecutor(pool)
         build_dataset(pooled, spec, executor=executor)
     # The worker processes made the rows and found the labels' candidates, several tasks of each.
-    assert executor.ran.count("batch_rows") > 1 and executor.ran.count("batch_candidates") > 1, executor.ran
+    assert executor.ran.count("batch_shard") > 1 and executor.ran.count("batch_candidates") > 1, executor.ran
     assert stored_rows(pooled, "t") == stored_rows(here, "t")
     mine, theirs = here.labels("t"), pooled.labels("t")
     assert mine is not None and theirs is not None and len(mine.anchors) > 10
@@ -190,7 +190,7 @@ def test_a_local_build_makes_its_rows_and_label_candidates_on_its_own_pool(tmp_p
     assert len(pools) == 1, "one pool for the whole build"
     ran = pools[0].ran
     assert ran.count("_build_chunk") > 1, ran
-    assert ran.count("batch_rows") > 1 and ran.count("batch_candidates") > 1, ran
+    assert ran.count("batch_shard") > 1 and ran.count("batch_candidates") > 1, ran
 
 
 def test_a_failing_build_removes_its_scratch_file_and_keeps_the_stored_version(

@@ -60,9 +60,47 @@ def test_unchanged_source_is_not_rebuilt_changed_one_is(store, src, tmp_path):
     assert info.source_hash == source_hash(changed, spec.params())
 
 
-def test_failed_write_rolls_back(store, src, monkeypatch):
-    before = store.dataset("h")
-    fids = store.all_fids("h")
+def _unchanged(store, before, fids, recs):
+    """The dataset 'h' as it was before a failed build, for this process's reader and a new one."""
+    assert leftover_ids(store._con()) == []
+    for reader in (store, CCSStore(store.path)):
+        info = reader.dataset("h")
+        assert (info.data_version, info.source_hash) == (before.data_version, before.source_hash)
+        assert reader.all_fids("h") == fids
+        assert len(reader.query("h", info.bounds_3857)) == len(fids)
+        for old, new in zip(recs, reader.load(fids), strict=True):
+            assert np.array_equal(old.base, new.base) and np.array_equal(old.original, new.original)
+        assert reader.integrity_ok()
+
+
+def test_failed_merge_rolls_back(store, src):
+    before, fids = store.dataset("h"), store.all_fids("h")
+    recs = store.load(fids)
+    # The store refuses the sixth contour a build stages: the merge's transaction fails part way.
+    store._con().execute(
+        "CREATE TEMP TRIGGER refuse_sixth BEFORE INSERT ON main.contours "
+        "WHEN (SELECT count(*) FROM main.contours WHERE dataset <> 'h') >= 5 "
+        "BEGIN SELECT RAISE(ABORT, 'refused'); END"
+    )
+    statements: list[str] = []
+    store._con().set_trace_callback(statements.append)
+    with pytest.raises(sqlite3.IntegrityError, match="refused"):
+        build_dataset(store, SourceSpec(src, "h", "h", source_scale=40_000), workers=1)
+    store._con().set_trace_callback(None)
+    store._con().execute("DROP TRIGGER refuse_sixth")
+    # The failure came while the rows were staged: the merge's transaction rolled back, no switch, the staged
+    # rows removed, the dataset's rows never touched.
+    rollback = statements.index("ROLLBACK")
+    batch = statements[: rollback + 1][::-1]
+    batch = batch[: batch.index("BEGIN IMMEDIATE")]
+    assert any(q.startswith("INSERT INTO contours(fid") for q in batch), batch
+    assert not any(q.startswith("UPDATE datasets SET id") for q in statements)
+    assert not any("DELETE FROM contours WHERE dataset='h'" in q for q in statements)
+    _unchanged(store, before, fids, recs)
+
+
+def test_a_row_its_shard_refuses_fails_the_build_and_leaves_the_store(store, src, monkeypatch):
+    before, fids = store.dataset("h"), store.all_fids("h")
     recs = store.load(fids)
     import engine.build.datasets as datasets
 
@@ -80,23 +118,10 @@ def test_failed_write_rolls_back(store, src, monkeypatch):
     with pytest.raises(sqlite3.IntegrityError, match="NOT NULL"):
         build_dataset(store, SourceSpec(src, "h", "h", source_scale=40_000), workers=1)
     store._con().set_trace_callback(None)
-    # The failure came while the rows were staged: the batch's transaction (6 inserts) rolled back, no switch,
-    # the staged rows removed, the dataset's rows never touched.
-    rollback = statements.index("ROLLBACK")
-    batch = statements[: rollback + 1][::-1]
-    batch = batch[: batch.index("BEGIN IMMEDIATE")]
-    assert sum(q.startswith("INSERT INTO contours") for q in batch) == 6
+    # The shard (written apart from the store) failed: nothing was merged, nothing switched.
+    assert not any(q.startswith("INSERT INTO contours") for q in statements)
     assert not any(q.startswith("UPDATE datasets SET id") for q in statements)
-    assert not any("DELETE FROM contours WHERE dataset='h'" in q for q in statements)
-    assert leftover_ids(store._con()) == []
-    for reader in (store, CCSStore(store.path)):
-        info = reader.dataset("h")
-        assert (info.data_version, info.source_hash) == (before.data_version, before.source_hash)
-        assert reader.all_fids("h") == fids
-        assert len(reader.query("h", info.bounds_3857)) == len(fids)
-        for old, new in zip(recs, reader.load(fids), strict=True):
-            assert np.array_equal(old.base, new.base) and np.array_equal(old.original, new.original)
-        assert reader.integrity_ok()
+    _unchanged(store, before, fids, recs)
 
 
 def test_rollback_inside_the_transaction(store):
@@ -244,6 +269,8 @@ def test_issue_12_a_build_failing_in_its_second_batch_leaves_the_stored_version(
     for reader in (store, CCSStore(store.path)):
         info = reader.dataset("h")
         assert (info.data_version, info.source_hash, info.n_contours) == (
-            before.data_version, before.source_hash, before.n_contours
+            before.data_version,
+            before.source_hash,
+            before.n_contours,
         )
         assert reader.all_fids("h") == fids
