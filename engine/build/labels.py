@@ -14,7 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from engine.cartography.dataset import dataset_cartography, label_sources
+from engine.cartography.dataset import dataset_cartography, is_labelled, label_sources
 from engine.cartography.labels import orient_angle, place_labels
 from engine.cartography.neighbour_uphill import PROBE_M, top_uphill
 from engine.intervals import infer_interval
@@ -46,8 +46,10 @@ def place_dataset_labels(
     info = store.dataset(dataset)
     elevations = store.elevations(dataset)
     carto = dataset_cartography(info, info.interval or infer_interval(elevations), elevations)
-    fids = store.all_fids(dataset)
-    # A batch of contours at a time: placing keeps each one's candidates, not its rows.
+    fid, elevation, _, _ = store.dataset_heads(dataset)
+    # Only the labelled contours' rows are read (an index contour in five, at the default interval), a batch at
+    # a time: placing keeps each one's candidates, not its rows.
+    fids = fid[is_labelled(carto, elevation)].tolist()
     batches = (store.load(fids[k : k + LABEL_BATCH]) for k in range(0, len(fids), LABEL_BATCH))
     sources = (src for records in batches for src in label_sources(carto, records))
     last_zoom = label_last_zoom(max_zoom)

@@ -139,6 +139,14 @@ def dataset_cartography(info: DatasetInfo, interval: float | None, elevations: A
 UPHILL_SIGN: dict[str | None, int] = {"left": 1, "right": -1, None: 0}
 
 
+def is_labelled(carto: DatasetCartography, elevations: ArrayLike) -> NDArray[np.bool_]:
+    """Which contours of these elevations carry labels: the index contours, but not the 0 m line unless
+    ``sea="keep"`` (a coastline is not labelled with a height, a dropped line not at all)."""
+    heights = np.asarray(elevations, dtype=np.float64)
+    index = carto.schedule.level_of(heights) == 1
+    return np.asarray(index & ~(carto.is_sea_level(heights) & (carto.options.sea != "keep")), dtype=np.bool_)
+
+
 def label_sources(carto: DatasetCartography, records: Sequence[ContourRecord]) -> list[LabelSource]:
     """The index contours among ``records``, as the label placement takes them (not the 0 m line unless
     ``sea="keep"``: a coastline is not labelled with a height, a dropped line not at all); each told which
@@ -146,13 +154,11 @@ def label_sources(carto: DatasetCartography, records: Sequence[ContourRecord]) -
     if not records:
         return []
     elevations = np.array([r.elevation for r in records])
-    levels = carto.schedule.level_of(elevations)
     ranks = carto.schedule.rank_of(elevations)
-    unlabelled = carto.is_sea_level(elevations) & (carto.options.sea != "keep")
     uphill = UPHILL_SIGN[carto.uphill_side] if carto.options.label_orientation == "uphill" else 0
     out = []
-    for rec, level, rank, skip in zip(records, levels.tolist(), ranks.tolist(), unlabelled.tolist(), strict=True):
-        if level != 1 or skip:
+    for rec, rank, wanted in zip(records, ranks.tolist(), is_labelled(carto, elevations).tolist(), strict=True):
+        if not wanted:
             continue
         label_zoom = carto.schedule.label_zoom(rank, carto.start_zoom)
         out.append(

@@ -13,11 +13,15 @@ to keep that under ``MESH_DEVIATION_M``; at the rows themselves the two agree ex
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import trimesh
 
 from engine.errors import InvalidParameter
 from engine.types import Coords
+
+if TYPE_CHECKING:
+    import trimesh  # the oracle's only: imported where used, since it costs every process half a second
 
 
 def check_t(t: float) -> float:
@@ -75,6 +79,8 @@ def ccs_mesh(base: Coords, top: Coords, heights: int | None = None) -> trimesh.T
         d = b + m
         faces.append(np.column_stack([a, b, d]))
         faces.append(np.column_stack([a, d, c]))
+    import trimesh
+
     return trimesh.Trimesh(vertices=vertices, faces=np.concatenate(faces), process=False)
 
 

@@ -94,6 +94,28 @@ def tile_with_labels(renderer: Renderer, store: CCSStore, dataset: str) -> tuple
     raise AssertionError("no tile with labels")
 
 
+def test_placing_labels_reads_the_rows_of_the_labelled_contours_only(
+    sample_store: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    store = CCSStore(sample_store, readonly=True)
+    every = store.load(store.all_fids("sample"))
+    info, elevations = store.dataset("sample"), store.elevations("sample")
+    carto = dataset_cartography(info, info.interval or infer_interval(elevations), elevations)
+    labelled = [src.fid for src in label_sources(carto, every)]
+    loaded: list[int] = []
+    real_load = CCSStore.load
+
+    def recorded_load(self: CCSStore, fids: list[int]) -> list:
+        loaded.extend(fids)
+        return real_load(self, fids)
+
+    monkeypatch.setattr(CCSStore, "load", recorded_load)
+    monkeypatch.setattr(build_labels, "uphill_from_neighbours", lambda store, dataset, anchors: anchors)
+    placed = build_labels.place_dataset_labels(store, "sample", 16)
+    assert loaded == labelled and len(labelled) < len(every) / 3
+    assert set(placed.anchors.fid.tolist()) <= set(labelled)
+
+
 def test_first_tile_after_a_build_places_no_labels(
     tmp_path: Path, sample_store: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

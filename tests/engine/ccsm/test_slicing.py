@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 import shapely
@@ -170,3 +173,13 @@ def test_ccs_mesh_has_the_rows_as_vertices_and_heights_as_z(ring_ccs: CCS) -> No
 def test_ccs_mesh_rejects_fewer_than_two_heights() -> None:
     with pytest.raises(InvalidParameter):
         ccs_mesh(np.zeros((3, 2)), np.ones((3, 2)), heights=1)
+
+
+def test_builds_and_the_service_start_without_loading_the_oracle() -> None:
+    """trimesh serves only as the test oracle; loading it costs every build worker and server half a second."""
+    code = (
+        "import sys, engine.build.datasets, engine.serve.renderer, app.main; "
+        "print(sorted(m for m in ('trimesh', 'networkx') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr
