@@ -56,11 +56,14 @@ $(BIN)/pip:
 	$(call need,$(PYTHON) -c "import ensurepip" >/dev/null 2>&1,python3-venv,Python's venv support (ensurepip) for $(PYTHON))
 	$(PYTHON) -m venv $(VENV)
 
-# Reinstalls only when the venv, pyproject.toml or an npm manifest changes.
+# The Python packages' versions the suite last passed with (pip freeze); empty (make install CONSTRAINTS=): pip chooses.
+CONSTRAINTS ?= constraints.txt
+
+# Reinstalls only when the venv, pyproject.toml, the constraints or an npm manifest changes.
 # Each one-time step says what it does and about how long it takes first (a fresh make run is ~2.5 minutes).
-.install-stamp: $(BIN)/pip pyproject.toml $(foreach d,$(NPM_DIRS),$(wildcard $(d)/package.json $(d)/package-lock.json)) | need-node
+.install-stamp: $(BIN)/pip pyproject.toml $(CONSTRAINTS) $(foreach d,$(NPM_DIRS),$(wildcard $(d)/package.json $(d)/package-lock.json)) | need-node
 	@echo "installing Python packages into $(VENV) (one time, ~1 min)"
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e ".[dev]"
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check $(if $(CONSTRAINTS),-c $(CONSTRAINTS)) -e ".[dev]"
 	@for d in $(NPM_DIRS); do \
 	  if [ -f $$d/package.json ]; then echo "installing JavaScript packages in $$d: npm ci (one time, ~15 s)"; (cd $$d && npm ci --no-audit --no-fund --loglevel=error) || exit 1; fi; \
 	done
