@@ -55,7 +55,7 @@ PHASES = [
     ("crossing repair (with its rebuilds)", "engine/ccsm/build.py", "resolve_crossings"),
     ("  contacts by block", "engine/ccsm/blocks.py", "find_crossings_by_block"),
     ("store writes (with labels)", "engine/store/store.py", "save"),
-    ("  staging rows", "engine/store/store.py", "_stage_rows"),
+    ("  merging the shards", "engine/store/store.py", "_stage_shards"),
     ("  labels", "engine/build/labels.py", "place_dataset_labels"),
 ]
 

@@ -29,7 +29,7 @@ from engine.store.schema import PIECE_ROWS
 
 #: Columns of a contour's row that :func:`contour_record` decodes, in its order.
 CONTOUR_COLUMNS = (
-    "fid, dataset, contour_id, elevation, closed, grp, vanish_scale, length_m, base, top, original, original_w, "
+    "fid, contour_id, elevation, closed, grp, vanish_scale, length_m, base, top, original, original_w, "
     "t_at_scale, sim_t, sim, sig, sig_top, sig_original"
 )
 #: Columns of a contour's row that :func:`contour_head` decodes, in its order.
@@ -109,23 +109,22 @@ def contour_record(r: Sequence[Any]) -> ContourRecord:
     """A contour selected by :data:`CONTOUR_COLUMNS`."""
     return ContourRecord(
         fid=r[0],
-        dataset=r[1],
-        contour_id=r[2],
-        elevation=r[3],
-        closed=bool(r[4]),
-        group=r[5],
-        vanish_scale=vanish_value(r[6]),
-        length_m=r[7],
-        base=f8_array(r[8], 2),
-        top=f8_array(r[9], 2),
-        original=f8_array(r[10], 2),
-        original_w=f8_array(r[11], 2),
-        t_at_scale=f8_array(r[12]),
-        sim_t=f8_array(r[13]),
-        sim=f8_array(r[14]),
-        sig=f4_array(r[15]),
-        sig_top=f4_array(r[16]),
-        sig_original=f4_array(r[17]),
+        contour_id=r[1],
+        elevation=r[2],
+        closed=bool(r[3]),
+        group=r[4],
+        vanish_scale=vanish_value(r[5]),
+        length_m=r[6],
+        base=f8_array(r[7], 2),
+        top=f8_array(r[8], 2),
+        original=f8_array(r[9], 2),
+        original_w=f8_array(r[10], 2),
+        t_at_scale=f8_array(r[11]),
+        sim_t=f8_array(r[12]),
+        sim=f8_array(r[13]),
+        sig=f4_array(r[14]),
+        sig_top=f4_array(r[15]),
+        sig_original=f4_array(r[16]),
     )
 
 
@@ -197,7 +196,8 @@ class RowTally:
 def dataset_row(
     dataset: str, meta: NewDataset, data_version: int, built_at: float, rows: RowTally
 ) -> tuple[Any, ...]:
-    """The values of a dataset's row, in the order of the ``datasets`` table."""
+    """The values of a dataset's row, in the order of the ``datasets`` table (a build's row: its rows are stored
+    under its id)."""
     return (
         dataset,
         meta.name,
@@ -218,6 +218,7 @@ def dataset_row(
         float(meta.target_scale),
         f8_blob(np.asarray(meta.ladder, dtype=np.float64)),
         json.dumps(meta.bad_features),
+        dataset,
     )
 
 

@@ -21,7 +21,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from engine.errors import StoreBusy, StoreError, StoreFormatError, StoreUnwritable
-from engine.store.schema import SCHEMA, STORE_FORMAT
+from engine.store.schema import MIGRATIONS, SCHEMA, STORE_FORMAT
 
 #: SQLite's messages for a write the file system refuses (full disk, read-only mount or file, I/O error).
 _UNWRITABLE_MESSAGES = ("database or disk is full", "readonly database", "disk i/o error", "unable to open")
@@ -54,6 +54,22 @@ def create_schema(con: sqlite3.Connection) -> None:
         con.execute("INSERT OR IGNORE INTO store_meta VALUES ('format', ?)", (str(STORE_FORMAT),))
         con.execute("INSERT OR IGNORE INTO store_meta VALUES ('version_counter', '0')")
         con.commit()
+
+
+def migrate(con: sqlite3.Connection) -> None:
+    """Bring a store of an older format to this one (:data:`~engine.store.schema.MIGRATIONS`), in one write
+    transaction; another process that migrated it first leaves nothing to do."""
+    con.execute("BEGIN IMMEDIATE")
+    try:
+        found = stored_format(con)
+        while found is not None and found in MIGRATIONS:
+            for statement in MIGRATIONS[found]:
+                con.execute(statement)
+            found = stored_format(con)
+        con.execute("COMMIT")
+    except BaseException:
+        con.execute("ROLLBACK")
+        raise
 
 
 def stored_format(con: sqlite3.Connection) -> int | None:
@@ -95,6 +111,7 @@ class StoreFile:
             con = self._con()
             if not readonly:
                 create_schema(con)
+                migrate(con)
             found = stored_format(con)
         except sqlite3.DatabaseError as exc:
             raise StoreError(f"store {self.path.name} cannot be opened: {exc}") from exc

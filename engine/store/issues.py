@@ -21,11 +21,6 @@ def insert_issues(cur: sqlite3.Cursor, dataset: str, fid: int, issues: Iterable[
     )
 
 
-def delete_issues(cur: sqlite3.Cursor, dataset: str) -> None:
-    """Forget a dataset's issues (its rows are being replaced or removed)."""
-    cur.execute("DELETE FROM contour_issues WHERE dataset=?", (dataset,))
-
-
 def read_issues(
     con: sqlite3.Connection, dataset: str, limit: int = REPORTED_ISSUES
 ) -> tuple[list[dict[str, Any]], int]:

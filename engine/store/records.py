@@ -86,8 +86,6 @@ class ContourRecord(ContourColumns):
 
     #: Stable integer id of the row (MVT feature id).
     fid: int
-    #: The dataset's id.
-    dataset: str
 
     @property
     def nbytes(self) -> int:

@@ -7,7 +7,7 @@ file is made in one script and its format is one number.
 from __future__ import annotations
 
 #: Bumped whenever the layout of the file changes; a store of another format is refused.
-STORE_FORMAT = 3
+STORE_FORMAT = 4
 #: Rows of a stored piece of a contour's rows (piece k holds rows k * PIECE_ROWS to (k + 1) * PIECE_ROWS, both
 #: included): a tile of a dataset too large to hold in memory reads only the pieces it meets. A multiple of the
 #: tiles' chunk rows (engine.serve.pieces checks it), so a piece's chunks are the whole line's.
@@ -15,6 +15,17 @@ PIECE_ROWS = 256
 #: The kinds of stored pieces: of the CCS rows (columns base, top, sig, sig_top) and of the original (columns
 #: original, sig_original); kind ``k`` is stored in tables ``k_pieces`` and ``k_piece_rtree``.
 PIECE_KINDS = {"ccs": ("base", "top", "sig", "sig_top"), "original": ("original", "sig_original")}
+
+
+#: SQL that brings a store of an older format to this one, by the format it has: format 3 kept a dataset's rows
+#: under its own id, which ``rows_id`` now names (its first rebuild moves them to a row id of their own).
+MIGRATIONS: dict[int, tuple[str, ...]] = {
+    3: (
+        "ALTER TABLE datasets ADD COLUMN rows_id TEXT NOT NULL DEFAULT ''",
+        "UPDATE datasets SET rows_id = id",
+        "UPDATE store_meta SET value = '4' WHERE key = 'format'",
+    ),
+}
 
 
 def _piece_tables(kind: str) -> str:
@@ -55,7 +66,9 @@ CREATE TABLE IF NOT EXISTS datasets(
     source_scale REAL NOT NULL,
     target_scale REAL NOT NULL,
     ladder BLOB NOT NULL,
-    bad_features TEXT NOT NULL
+    bad_features TEXT NOT NULL,
+    -- The id the dataset's contour rows are stored under (engine/store/staging.py).
+    rows_id TEXT NOT NULL
 );
 -- The small per-contour columns come before the rows: reading them (a tile's contour heads) does not walk
 -- the rows' overflow pages.

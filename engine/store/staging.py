@@ -1,29 +1,33 @@
 """Rows written out of sight: a build stages its rows under a private id, one short switch makes them the dataset.
 
-A build's rows go in bounded transactions under the dataset's *staged* id (:func:`staged_id`), which no reader
-asks for; the last transaction (:meth:`engine.store.store.CCSStore.save`) moves the old version's rows to the
-*retired* id (:func:`retired_id`), the staged rows to the dataset's id and writes its row, and the retired rows
-are then removed a few contours at a time (:func:`purge_some`). So no write waits on a build for longer than
-one bounded step, and a build killed at any moment leaves the previous version as it was (its staged rows are
-removed by the next build of that id or at the next start: :func:`leftover_ids`).
+A dataset's contour rows (their R*Tree entries, pieces and issues too) are stored under one of its two private
+*row ids* (:func:`row_ids`), and its row in ``datasets`` names which (``rows_id``); every read of its rows goes
+through that column. A build writes its rows in bounded transactions under the row id its dataset does not use
+now (:func:`staging_id`), which no reader asks for. The switch (:meth:`engine.store.store.CCSStore.save`) only
+points the dataset's row at them: no row is rewritten, so it takes the same few milliseconds whatever the
+dataset's size (renaming a 16x terrain's 450 MB of rows had held the write lock for 3 s). The replaced
+version's rows are then removed a few contours at a time (:func:`purge_some`). So no write waits on a build for
+longer than one bounded step, and a build killed at any moment leaves the previous version as it was (its
+staged rows are removed by the next build of that id or at the next start: :func:`leftover_ids`).
 
-A private id has the byte length of the dataset's id: a row renamed keeps its size, so SQLite overwrites its
-first page in place instead of copying its blobs (a 450 MB rename costs 0.5 s instead of 4 s and 450 MB of
-write-ahead log). The staged id replaces the first character by a marker, the retired id the last; markers
-never occur in a dataset id (``[a-z0-9_-]``), so the two never meet each other or a real id.
+A row id replaces the first (one of them) or the last (the other) character of the dataset's id by a marker;
+markers never occur in a dataset id (``[a-z0-9_-]``), so the two never meet each other or a real id. A store
+of format 3 kept a dataset's rows under the dataset's own id: opened for writing it says so in ``rows_id``
+(:mod:`engine.store.schema`), and the first rebuild moves it to a private row id like any other.
 """
 
 from __future__ import annotations
 
 import sqlite3
 
+from engine.errors import StoreError
 from engine.store.schema import PIECE_KINDS
 
 #: The characters of a dataset id and, position for position, the markers that stand for them in private ids.
 _ID_CHARS = "abcdefghijklmnopqrstuvwxyz0123456789_-"
 _MARKERS = "".join(chr(c) for c in range(2, 32)) + "\x7f`{|}~^\\"
 _MARK = dict(zip(_ID_CHARS, _MARKERS, strict=True))
-#: Private ids of a dataset id outside ``[a-z0-9_-]`` (or of one character): a prefix (renaming rewrites rows).
+#: Row ids of a dataset id outside ``[a-z0-9_-]`` (or of one character): a prefix and a tag.
 _OTHER = "\x01"
 _PRIVATE = frozenset(_MARKERS + _OTHER)
 
@@ -39,40 +43,46 @@ def _marked(dataset: str, at: int, tag: str) -> str:
     return "".join(chars)
 
 
-def staged_id(dataset: str) -> str:
-    """The id a build of ``dataset`` writes its rows under until the switch."""
-    return _marked(dataset, 0, "s")
+def row_ids(dataset: str) -> tuple[str, str]:
+    """The two private ids a dataset's rows are stored under, one version after the other."""
+    return _marked(dataset, 0, "s"), _marked(dataset, -1, "r")
 
 
-def retired_id(dataset: str) -> str:
-    """The id the replaced (or deleted) version's rows wait under to be removed."""
-    return _marked(dataset, -1, "r")
+def staging_id(dataset: str, live: str | None) -> str:
+    """The row id a build of ``dataset`` writes under: the one of its two that its version ``live`` (its
+    current row id, None when it has none) does not use."""
+    first, second = row_ids(dataset)
+    return second if live == first else first
 
 
 def is_private(ident: str) -> bool:
-    """True for a staged or retired id (never a dataset's)."""
+    """True for a row id (never a dataset's)."""
     return any(c in _PRIVATE for c in ident)
 
 
-def rename_rows(cur: sqlite3.Cursor, old: str, new: str) -> None:
-    """Give the contour rows (their R*Tree entries, pieces and issues) of id ``old`` the id ``new``."""
-    fids = "SELECT fid FROM contours WHERE dataset=?"
-    cur.execute(f"UPDATE contour_rtree SET dataset=? WHERE fid IN ({fids})", (new, old))
-    for kind in PIECE_KINDS:
-        pieces = f"SELECT piece FROM {kind}_pieces WHERE fid IN ({fids})"
-        cur.execute(f"UPDATE {kind}_piece_rtree SET dataset=? WHERE piece IN ({pieces})", (new, old))
-    cur.execute("UPDATE contour_issues SET dataset=? WHERE dataset=?", (new, old))
-    cur.execute("UPDATE contours SET dataset=? WHERE dataset=?", (new, old))
+def live_row_ids(cur: sqlite3.Cursor | sqlite3.Connection) -> set[str]:
+    """The row ids the stored datasets read (a staged dataset row, of private id, reads none yet)."""
+    return {rows for ident, rows in cur.execute("SELECT id, rows_id FROM datasets") if not is_private(ident)}
 
 
 def purge_some(cur: sqlite3.Cursor, ident: str, limit: int = PURGE_CONTOURS) -> int:
-    """Remove up to ``limit`` contours of id ``ident`` with their pieces; when none is left, its dataset, label
-    and issue rows too. The number of contours removed (0: nothing of ``ident`` is left)."""
+    """Remove up to ``limit`` contours of row id ``ident`` with their pieces; when none is left, its issue rows
+    too, and the dataset and label rows of a private id (a staged build's). The number of contours removed (0:
+    nothing of ``ident`` is left). The rows a stored dataset reads are never removed.
+
+    Raises
+    ------
+    StoreError
+        ``ident`` holds a stored dataset's rows.
+    """
+    if ident in live_row_ids(cur):
+        raise StoreError(f"the rows {ident!r} are a stored dataset's: not removed")
     fids = [r[0] for r in cur.execute("SELECT fid FROM contours WHERE dataset=? LIMIT ?", (ident, int(limit)))]
     if not fids:
         cur.execute("DELETE FROM contour_issues WHERE dataset=?", (ident,))
-        cur.execute("DELETE FROM labels WHERE dataset=?", (ident,))
-        cur.execute("DELETE FROM datasets WHERE id=?", (ident,))
+        if is_private(ident):
+            cur.execute("DELETE FROM labels WHERE dataset=?", (ident,))
+            cur.execute("DELETE FROM datasets WHERE id=?", (ident,))
         return 0
     marks = ",".join("?" * len(fids))
     for kind in PIECE_KINDS:
@@ -86,15 +96,19 @@ def purge_some(cur: sqlite3.Cursor, ident: str, limit: int = PURGE_CONTOURS) -> 
 
 
 def leftover_ids(con: sqlite3.Connection) -> list[str]:
-    """The private ids that hold rows (of builds killed or stopped, of versions not yet removed)."""
-    rows = con.execute("SELECT DISTINCT dataset FROM contours UNION SELECT id FROM datasets").fetchall()
-    return [r[0] for r in rows if is_private(r[0])]
+    """The ids that hold rows no stored dataset reads (of builds killed or stopped, of versions not yet
+    removed), sorted."""
+    rows = {r[0] for r in con.execute("SELECT DISTINCT dataset FROM contours")}
+    staged = {r[0] for r in con.execute("SELECT id FROM datasets") if is_private(r[0])}
+    return sorted((rows | staged) - live_row_ids(con))
 
 
 def owner_of(ident: str) -> str | None:
-    """The dataset id a staged id stands for (None for a retired id)."""
+    """The dataset id a row id stands for (None for a dataset's own id)."""
     if ident.startswith(_OTHER):
-        return ident[2:] if ident[1:2] == "s" else None
+        return ident[2:]
     if ident[0] in _PRIVATE:
         return _ID_CHARS[_MARKERS.index(ident[0])] + ident[1:]
+    if ident[-1] in _PRIVATE:
+        return ident[:-1] + _ID_CHARS[_MARKERS.index(ident[-1])]
     return None

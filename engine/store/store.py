@@ -42,7 +42,7 @@ from engine.store.codec import (
     stored_labels,
     vanish_value,
 )
-from engine.store.issues import REPORTED_ISSUES, delete_issues, insert_issues, read_issues
+from engine.store.issues import REPORTED_ISSUES, insert_issues, read_issues
 from engine.store.records import (
     ContourHead,
     ContourRecord,
@@ -59,9 +59,8 @@ from engine.store.staging import (
     leftover_ids,
     owner_of,
     purge_some,
-    rename_rows,
-    retired_id,
-    staged_id,
+    row_ids,
+    staging_id,
 )
 
 #: A build's rows are written at most this many contours, or rows, per transaction (then the next write of
@@ -151,24 +150,25 @@ class CCSStore(BuildBook):
         deleted during its build never comes back: BuildCancelled is raised instead. ``progress`` gets
         (contours written, contours written).
         """
-        stage = staged_id(dataset)
+        stage = staging_id(dataset, self._stored_rows_id(dataset))
         self.purge(stage)  # what a killed build of this id left
         try:
             counts = self._stage_shards(dataset, stage, shards, progress, only_if_building)
             with self._write() as cur:
                 self._check_building(cur, dataset, only_if_building)
                 cur.execute(
-                    "INSERT INTO datasets VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                    "INSERT INTO datasets VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                     dataset_row(stage, meta, 0, time.time(), counts),
                 )
             placed = labels(stage) if labels is not None else None
             with self._write() as cur:
                 self._check_building(cur, dataset, only_if_building)
-                self._switch(cur, dataset, stage, placed)
+                replaced = self._switch(cur, dataset, stage, placed)
         except BaseException:
             self._purge_quietly(stage)
             raise
-        self._purge_quietly(retired_id(dataset))
+        if replaced is not None:
+            self._purge_quietly(replaced)
         return self.dataset(dataset)
 
     @staticmethod
@@ -198,10 +198,12 @@ class CCSStore(BuildBook):
         return counts
 
     @classmethod
-    def _switch(cls, cur: sqlite3.Cursor, dataset: str, stage: str, placed: StoredLabels | None) -> None:
-        """The one short transaction that makes the staged rows the dataset's new version."""
-        cls._retire(cur, dataset)
-        rename_rows(cur, stage, dataset)
+    def _switch(cls, cur: sqlite3.Cursor, dataset: str, stage: str, placed: StoredLabels | None) -> str | None:
+        """The one short transaction that makes the staged rows the dataset's new version: its row points at
+        them, no contour row is rewritten. The row id of the version replaced (its rows to remove), or None."""
+        replaced = cls._retire(cur, dataset)
+        if replaced == stage:
+            raise StoreError(f"dataset {dataset!r} was replaced by another build meanwhile")
         counter = int(cur.execute("SELECT value FROM store_meta WHERE key='version_counter'").fetchone()[0]) + 1
         cur.execute("UPDATE store_meta SET value=? WHERE key='version_counter'", (str(counter),))
         cur.execute(
@@ -210,17 +212,28 @@ class CCSStore(BuildBook):
         if placed is not None:
             cur.execute("INSERT INTO labels VALUES (?,?,?,?,?,?,?,?,?,?,?,?)", label_row(dataset, counter, placed))
             for label_fid, reason in placed.anchors.issues:
-                insert_issues(cur, dataset, label_fid, [("labels", reason)])
+                insert_issues(cur, stage, label_fid, [("labels", reason)])
         forget_build(cur, dataset)
+        return replaced
 
     @staticmethod
-    def _retire(cur: sqlite3.Cursor, dataset: str) -> None:
-        """Take a dataset's version out of sight: its row, labels and issues gone, its contour rows under the
-        retired id (removed afterwards by :meth:`purge`)."""
+    def _retire(cur: sqlite3.Cursor, dataset: str) -> str | None:
+        """Take a dataset's version out of sight: its row and labels gone. The row id its contour rows and
+        issues wait under to be removed (by :meth:`purge`), or None when it was not stored."""
+        row = cur.execute("SELECT rows_id FROM datasets WHERE id=?", (dataset,)).fetchone()
         cur.execute("DELETE FROM datasets WHERE id=?", (dataset,))
         cur.execute("DELETE FROM labels WHERE dataset=?", (dataset,))
-        delete_issues(cur, dataset)
-        rename_rows(cur, dataset, retired_id(dataset))
+        return None if row is None else str(row[0])
+
+    def _stored_rows_id(self, dataset: str) -> str | None:
+        """The row id a stored dataset's rows are under (None: not stored)."""
+        row = self._con().execute("SELECT rows_id FROM datasets WHERE id=?", (dataset,)).fetchone()
+        return None if row is None else str(row[0])
+
+    def _rows_of(self, dataset: str) -> str:
+        """The id to read a dataset's rows by: its row id (a staged build's dataset row is its own); an unknown
+        dataset's own id, under which no row is stored."""
+        return self._stored_rows_id(dataset) or dataset
 
     def purge(self, ident: str) -> None:
         """Remove every row of a private id (:mod:`engine.store.staging`), a few contours per transaction."""
@@ -255,7 +268,7 @@ class CCSStore(BuildBook):
     def contour_issues(self, dataset: str, limit: int = REPORTED_ISSUES) -> tuple[list[dict[str, Any]], int]:
         """The dataset's contours served without part of their build (``fid``, ``id``, ``step``, ``reason``;
         the first ``limit``) and how many there are."""
-        return read_issues(self._con(), dataset, limit)
+        return read_issues(self._con(), self._rows_of(dataset), limit)
 
     def delete(self, dataset: str) -> bool:
         """Remove a dataset and its build status; True if it was stored."""
@@ -271,13 +284,12 @@ class CCSStore(BuildBook):
         can no longer write it); its rows, and what its build staged, are then removed a few at a time.
         (stored, had a build)."""
         with self._write() as cur:
-            stored = cur.execute("SELECT 1 FROM datasets WHERE id=?", (dataset,)).fetchone() is not None
             build = has_build(cur, dataset)
-            self._retire(cur, dataset)
+            replaced = self._retire(cur, dataset)
             forget_build(cur, dataset)
-        self._purge_quietly(retired_id(dataset))
-        self._purge_quietly(staged_id(dataset))
-        return stored, build
+        for ident in {replaced, *row_ids(dataset)} - {None}:  # its rows, and what a build of it staged
+            self._purge_quietly(str(ident))
+        return replaced is not None, build
 
     # -- contours ----------------------------------------------------------------------------------------
     def query(self, dataset: str, bounds_3857: Sequence[float]) -> list[int]:
@@ -288,7 +300,7 @@ class CCSStore(BuildBook):
         cur = self._con().execute(
             "SELECT fid FROM contour_rtree WHERE maxx >= ? AND minx <= ? AND maxy >= ? AND miny <= ? "
             "AND dataset = ? ORDER BY fid",
-            (minx, maxx, miny, maxy, dataset),
+            (minx, maxx, miny, maxy, self._rows_of(dataset)),
         )
         return list(chain.from_iterable(cur))
 
@@ -304,7 +316,7 @@ class CCSStore(BuildBook):
         """
         minx, miny, maxx, maxy = (float(v) for v in bounds_3857)
         names = PIECE_KINDS[kind]
-        mine = fid_range if fid_range is not None else (dataset,)
+        mine = fid_range if fid_range is not None else (self._rows_of(dataset),)
         rows = self._con().execute(pieces_sql(kind, fid_range is not None), (minx, maxx, miny, maxy, *mine)).fetchall()
         # Sorted here, not by SQL's ORDER BY, whose sorter copies every row with its blobs.
         fid = np.array([r[0] for r in rows], dtype=np.int64)
@@ -327,7 +339,7 @@ class CCSStore(BuildBook):
         """The per-contour columns of every contour of a dataset, in fid order, as arrays: fid, elevation,
         vanishing scale (inf: never vanishes) and the (n, S) t tables."""
         rows = self._con().execute(
-            f"SELECT {HEAD_COLUMNS} FROM contours WHERE dataset=? ORDER BY fid", (dataset,)
+            f"SELECT {HEAD_COLUMNS} FROM contours WHERE dataset=? ORDER BY fid", (self._rows_of(dataset),)
         ).fetchall()
         fid = np.array([r[0] for r in rows], dtype=np.int64)
         elevation = np.array([r[1] for r in rows], dtype=np.float64)
@@ -340,12 +352,16 @@ class CCSStore(BuildBook):
         """Every contour fid of a dataset, in input order."""
         return [
             r[0]
-            for r in self._con().execute("SELECT fid FROM contours WHERE dataset=? ORDER BY fid", (dataset,))
+            for r in self._con().execute(
+                "SELECT fid FROM contours WHERE dataset=? ORDER BY fid", (self._rows_of(dataset),)
+            )
         ]
 
     def elevations(self, dataset: str) -> NDArray[np.float64]:
         """The distinct elevations of a dataset's contours."""
-        rows = self._con().execute("SELECT DISTINCT elevation FROM contours WHERE dataset=?", (dataset,))
+        rows = self._con().execute(
+            "SELECT DISTINCT elevation FROM contours WHERE dataset=?", (self._rows_of(dataset),)
+        )
         return np.array([r[0] for r in rows], dtype=np.float64)
 
     def load(self, fids: Sequence[int]) -> list[ContourRecord]:

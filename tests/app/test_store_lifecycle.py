@@ -53,32 +53,32 @@ def test_sample_builds_on_first_start_and_restart_serves_from_store(tmp_path):
 
 
 #: Run in the killed process: ``ccsm build`` with a page cache small enough that the new rows spill into the WAL
-#: file, and a hook in the store's insert loop that reports the WAL size once KILL_AFTER_ROWS rows are in,
-#: then waits for the kill.
+#: file, and a hook in the store's merge of the build's shards that, once KILL_AFTER_RUNS runs are merged, merges
+#: one more and reports the WAL size inside that run's write transaction, then waits for the kill.
 KILLED_BUILD = """
 import os, signal, sys
 import engine.store.store as sq
 from pathlib import Path
 from app.cli import main
 
-after = int(os.environ["KILL_AFTER_ROWS"])
+after = int(os.environ["KILL_AFTER_RUNS"])
 wal = Path(os.environ["STORE"] + "-wal")
-real_save, real_row = sq.CCSStore.save, sq.contour_row
-seen = {"rows": 0, "wal_before": 0}
+real_save, real_merge = sq.CCSStore.save, sq.merge_run
+seen = {"runs": 0, "wal_before": 0}
 
 def save(self, *a, **k):
     self._con().execute("PRAGMA cache_size=8")
     seen["wal_before"] = wal.stat().st_size if wal.exists() else 0
     return real_save(self, *a, **k)
 
-def row(*a):
-    if seen["rows"] == after:
+def merge(*a):
+    real_merge(*a)
+    if seen["runs"] == after:
         print("inside the write", after, seen["wal_before"], wal.stat().st_size, flush=True)
         signal.pause()
-    seen["rows"] += 1
-    return real_row(*a)
+    seen["runs"] += 1
 
-sq.CCSStore.save, sq.contour_row = save, row
+sq.CCSStore.save, sq.merge_run = save, merge
 sys.argv = ["ccsm", *sys.argv[1:]]
 main()
 """
@@ -100,14 +100,14 @@ def test_killed_build_leaves_the_store_as_it_was(tmp_path, built_store):
         cwd=REPO,
         stdout=subprocess.PIPE,
         stderr=(tmp_path / "build.log").open("wb"),
-        env={**os.environ, "STORE": str(store), "KILL_AFTER_ROWS": "20"},
+        env={**os.environ, "STORE": str(store), "KILL_AFTER_RUNS": "0"},
     )
     try:
         assert proc.stdout is not None
         line = proc.stdout.readline().decode().split()
         assert line[:3] == ["inside", "the", "write"], (tmp_path / "build.log").read_text()[-2000:]
         wal_before, wal_now = int(line[4]), int(line[5])
-        assert wal_now > wal_before  # the deletes and 20 new rows are on disk, uncommitted
+        assert wal_now > wal_before  # a run of new rows is on disk, uncommitted
         os.kill(proc.pid, signal.SIGKILL)
     finally:
         proc.kill()

@@ -18,7 +18,7 @@ import engine.store.store as store_module
 from engine.build import job as build_job
 from engine.build.job import BuildJob
 from engine.scratch import SCRATCH_PREFIX, host_name
-from engine.store.staging import leftover_ids
+from engine.store.staging import leftover_ids, row_ids
 from engine.store.store import CCSStore
 from tests.app.conftest import synthetic_features, write_geojson
 
@@ -30,20 +30,20 @@ def _upload_job(store: Path, dataset: str, source: Path) -> BuildJob:
 
 @pytest.fixture()
 def held_build(monkeypatch, client, tmp_path):
-    """A build of 'mega' into the client's store, in a thread, held after its first staged batch until
-    ``release`` is set (``reached`` is set once it is held)."""
+    """A build of 'mega' into the client's store, in a thread, held after its first shard is staged (in runs of
+    two contours, each its own transaction) until ``release`` is set (``reached`` is set once it is held)."""
     store = Path(client.app.state.settings.store_path)
     reached, release = threading.Event(), threading.Event()
     monkeypatch.setattr(store_module, "STAGE_CONTOURS", 2)
-    real_add = store_module.RowTally.add
+    real_merge = store_module.RowTally.merge
 
-    def add_then_wait(self, c):  # called after a batch's transaction commits: no lock is held here
-        real_add(self, c)
-        if self.n == 2:
+    def merge_then_wait(self, other):  # called once a shard's runs are committed: no lock is held here
+        real_merge(self, other)
+        if not reached.is_set():
             reached.set()
             assert release.wait(120)
 
-    monkeypatch.setattr(store_module.RowTally, "add", add_then_wait)
+    monkeypatch.setattr(store_module.RowTally, "merge", merge_then_wait)
     assert CCSStore(store).reserve("mega", 31)  # what an accepted upload holds
     source = write_geojson(tmp_path / "mega.geojson", synthetic_features(seed=3))
     result: dict[str, int] = {}
@@ -86,7 +86,11 @@ def test_delete_reserve_and_readyz_answer_during_a_build_and_the_delete_holds(he
 
 def test_the_build_stores_the_dataset_when_nobody_deletes_it(held_build, client):
     store, release, thread, result = held_build
-    assert "mega" not in CCSStore(store).dataset_ids()  # staged rows are out of sight
+    held = CCSStore(store)
+    staged = held._con().execute(
+        "SELECT count(*) FROM contours WHERE dataset IN (?, ?)", row_ids("mega")
+    ).fetchone()[0]
+    assert staged > 0 and "mega" not in held.dataset_ids()  # staged rows are out of sight
     release.set()
     thread.join(120)
     assert result["rc"] == 0

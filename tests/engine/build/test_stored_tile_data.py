@@ -18,7 +18,7 @@ from engine.io.source import sample_contours_path
 from engine.serve.heads import DatasetHeads
 from engine.serve.pack import HeadColumns
 from engine.serve.renderer import Renderer
-from engine.store.schema import STORE_FORMAT
+from engine.store.schema import MIGRATIONS, STORE_FORMAT
 from engine.store.store import CCSStore, pieces_sql
 from engine.tiles.grid import Tile, buffered, tile_bounds, tiles_covering
 from engine.tiles.significance import row_significance
@@ -151,14 +151,15 @@ def test_a_version_stored_without_labels_has_them_placed_on_the_first_tile(
     assert len(calls) == 1
 
 
-def test_a_store_of_the_previous_format_is_refused_by_name(tmp_path: Path) -> None:
+def test_a_store_of_a_format_no_migration_reaches_is_refused_by_name(tmp_path: Path) -> None:
     path = tmp_path / "old.sqlite"
     CCSStore(path).close()
+    older = min(MIGRATIONS) - 1
     con = sqlite3.connect(path)
-    con.execute("UPDATE store_meta SET value=? WHERE key='format'", (str(STORE_FORMAT - 1),))
+    con.execute("UPDATE store_meta SET value=? WHERE key='format'", (str(older),))
     con.commit()
     con.close()
-    with pytest.raises(StoreError, match=f"has format {STORE_FORMAT - 1}, expected {STORE_FORMAT}"):
+    with pytest.raises(StoreError, match=f"has format {older}, expected {STORE_FORMAT}"):
         CCSStore(path)
 
 

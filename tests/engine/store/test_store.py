@@ -1,5 +1,6 @@
 import dataclasses
 import math
+import re
 import sqlite3
 
 import numpy as np
@@ -8,7 +9,8 @@ import pytest
 from engine.build.datasets import SourceSpec, build_dataset, source_hash
 from engine.errors import StoreError, UnknownLayer
 from engine.io.source import read_source
-from engine.store.staging import leftover_ids
+from engine.store.schema import PIECE_KINDS
+from engine.store.staging import leftover_ids, purge_some, row_ids
 from engine.store.store import CCSStore
 from tests.app.conftest import synthetic_features, write_geojson
 
@@ -95,7 +97,8 @@ def test_failed_merge_rolls_back(store, src):
     batch = batch[: batch.index("BEGIN IMMEDIATE")]
     assert any(q.startswith("INSERT INTO contours(fid") for q in batch), batch
     assert not any(q.startswith("UPDATE datasets SET id") for q in statements)
-    assert not any("DELETE FROM contours WHERE dataset='h'" in q for q in statements)
+    live = store._stored_rows_id("h")
+    assert not any(q.startswith(f"SELECT fid FROM contours WHERE dataset='{live}' LIMIT") for q in statements)
     _unchanged(store, before, fids, recs)
 
 
@@ -127,7 +130,7 @@ def test_a_row_its_shard_refuses_fails_the_build_and_leaves_the_store(store, src
 def test_rollback_inside_the_transaction(store):
     fids = store.all_fids("h")
     with pytest.raises(RuntimeError), store._write() as cur:
-        cur.execute("DELETE FROM contours WHERE dataset='h'")
+        cur.execute("DELETE FROM contours")
         raise RuntimeError("killed")
     assert store.all_fids("h") == fids
 
@@ -274,3 +277,78 @@ def test_issue_12_a_build_failing_in_its_second_batch_leaves_the_stored_version(
             before.n_contours,
         )
         assert reader.all_fids("h") == fids
+
+
+#: A statement that writes contour rows, their R*Tree entries, pieces or issues.
+ROW_WRITE = re.compile(
+    r"^(UPDATE|INSERT|DELETE|REPLACE)\b.*(\bcontours|contour_rtree|_pieces|_piece_rtree|contour_issues)\b"
+)
+
+
+def _rows_under(store: CCSStore, ident: str) -> int:
+    return store._con().execute("SELECT count(*) FROM contours WHERE dataset=?", (ident,)).fetchone()[0]
+
+
+def test_a_rebuild_switches_without_rewriting_a_row_and_alternates_its_row_ids(store, src):
+    first = store._stored_rows_id("h")
+    n_first = _rows_under(store, first)
+    statements: list[str] = []
+    store._con().set_trace_callback(statements.append)
+    info, rebuilt = build_dataset(store, SourceSpec(src, "h", "h", source_scale=40_000), workers=1)
+    store._con().set_trace_callback(None)
+    assert rebuilt
+    at = next(k for k, q in enumerate(statements) if q.startswith("UPDATE datasets SET id"))
+    begin = max(k for k in range(at) if statements[k] == "BEGIN IMMEDIATE")
+    switch = statements[begin : statements.index("COMMIT", at) + 1]
+    assert not [q for q in switch if ROW_WRITE.match(q)], switch  # the switch points at the rows, no more
+    second = store._stored_rows_id("h")
+    assert {first, second} == set(row_ids("h"))
+    assert _rows_under(store, first) == 0 and _rows_under(store, second) == info.n_contours == n_first
+    assert leftover_ids(store._con()) == []
+    assert len(store.query("h", info.bounds_3857)) == info.n_contours == len(store.all_fids("h"))
+    assert len(store.dataset_heads("h")[0]) == info.n_contours
+    third, _ = build_dataset(store, SourceSpec(src, "h", "h", source_scale=45_000), workers=1)
+    assert store._stored_rows_id("h") == first and _rows_under(store, second) == 0
+    assert third.data_version > info.data_version and store.integrity_ok()
+
+
+def test_the_rows_a_stored_dataset_reads_are_never_purged(store):
+    live = store._stored_rows_id("h")
+    with pytest.raises(StoreError, match="a stored dataset's"), store._write() as cur:
+        purge_some(cur, live)
+    assert _rows_under(store, live) == store.dataset("h").n_contours
+
+
+def test_a_format_3_store_is_migrated_and_its_first_rebuild_moves_its_rows(tmp_path, src):
+    path = tmp_path / "old.sqlite"
+    store = CCSStore(path)
+    build_dataset(store, SourceSpec(src, "h", "h"), workers=1)
+    before, fids = store.dataset("h"), store.all_fids("h")
+    recs, labels, issues = store.load(fids), store.labels("h"), store.contour_issues("h")
+    live = store._stored_rows_id("h")
+    store.close()
+    # Format 3's layout: a dataset's rows under its own id, no rows_id column.
+    con = sqlite3.connect(path)
+    tables = ["contours", "contour_rtree", "contour_issues", *(f"{kind}_piece_rtree" for kind in PIECE_KINDS)]
+    for table in tables:
+        con.execute(f"UPDATE {table} SET dataset='h' WHERE dataset=?", (live,))
+    con.execute("ALTER TABLE datasets DROP COLUMN rows_id")
+    con.execute("UPDATE store_meta SET value='3' WHERE key='format'")
+    con.commit()
+    con.close()
+    with pytest.raises(StoreError, match="has format 3, expected 4"):
+        CCSStore(path, readonly=True)  # a reader cannot migrate it
+
+    migrated = CCSStore(path)
+    assert migrated._stored_rows_id("h") == "h" and CCSStore(path, readonly=True).all_fids("h") == fids
+    for old, new in zip(recs, migrated.load(migrated.all_fids("h")), strict=True):
+        assert np.array_equal(old.base, new.base) and old.contour_id == new.contour_id
+    assert len(migrated.query("h", before.bounds_3857)) == len(fids)
+    assert migrated.contour_issues("h") == issues
+    assert np.array_equal(migrated.labels("h").anchors.fid, labels.anchors.fid)
+    assert leftover_ids(migrated._con()) == []
+
+    info, rebuilt = build_dataset(migrated, SourceSpec(src, "h", "h", source_scale=40_000), workers=1)
+    assert rebuilt and migrated._stored_rows_id("h") in row_ids("h")
+    assert _rows_under(migrated, "h") == 0 and leftover_ids(migrated._con()) == []
+    assert len(migrated.all_fids("h")) == info.n_contours and migrated.integrity_ok()
