@@ -148,7 +148,8 @@ def tiles_digest(store_path: Path) -> str:
     from engine.tiles.grid import tiles_covering
     from engine.types import Bounds
 
-    store = CCSStore(store_path, readonly=True)
+    # Opened for writing: a store an older checkout wrote (--code) is migrated to this format first.
+    store = CCSStore(store_path)
     bounds = Bounds(*store.dataset("bench").bounds_3857)
     renderer = Renderer(store)
     digest = hashlib.sha256()
