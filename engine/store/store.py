@@ -142,9 +142,10 @@ class CCSStore(BuildBook):
         contours or :data:`STAGE_ROWS` rows per transaction, under the dataset's staged id
         (:mod:`engine.store.staging`): other writes wait at most one such step, readers see nothing of it. The
         dataset's row goes in last; ``labels``, when given, is called with the staged id (its rows and row are
-        readable under it) and returns the anchors. The switch is one short transaction: the old version's rows
-        retired, the staged ones renamed to the dataset, its row, labels and new ``data_version`` in; the
-        retired rows are then removed a few at a time. An exception (or a killed process) before the switch
+        readable under it) and returns the anchors. The switch is one short transaction that rewrites no contour
+        row: the old version's row and labels out, the staged row made the dataset's (it names the staged rows),
+        its labels and new ``data_version`` in; the replaced version's rows are then removed a few at a time.
+        An exception (or a killed process) before the switch
         leaves the previous version as it was and its staged rows to be removed. With ``only_if_building``
         every transaction checks that the dataset's build is still recorded, the switch too, so a dataset
         deleted during its build never comes back: BuildCancelled is raised instead. ``progress`` gets
