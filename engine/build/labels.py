@@ -44,9 +44,9 @@ def place_dataset_labels(
         The dataset is not stored.
     """
     info = store.dataset(dataset)
-    elevations = store.elevations(dataset)
-    carto = dataset_cartography(info, info.interval or infer_interval(elevations), elevations)
     fid, elevation, _, _ = store.dataset_heads(dataset)
+    elevations = np.unique(elevation)  # the distinct levels, from the heads read for the fids anyway
+    carto = dataset_cartography(info, info.interval or infer_interval(elevations), elevations)
     # Only the labelled contours' rows are read (an index contour in five, at the default interval), a batch at
     # a time: placing keeps each one's candidates, not its rows.
     fids = fid[is_labelled(carto, elevation)].tolist()

@@ -2,7 +2,8 @@
 
 A worker that makes a batch of store rows (``engine.build.datasets.batch_shard``) writes them into a small
 SQLite database of the store's own tables, held in memory, and returns that database's bytes
-(:class:`Shard`). The build process then only merges each shard into the store (:func:`merge_shard`): one
+(:class:`Shard`). The build process then only merges each shard into the store (:func:`attached`,
+:func:`merge_run`): one
 ``INSERT ... SELECT`` per table run by SQLite itself, instead of unpickling every row's arrays and inserting
 them one statement at a time. The fids and piece ids a merge gives are the ones a row-by-row insert gives (the
 next free ones, in the shard's order), so the store holds the same rows under the same ids whichever way they
