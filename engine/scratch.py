@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any, overload
 
 from engine.errors import StoreError
+from engine.payloads import pickled
 from engine.types import Contour
 
 #: Name prefix of scratch files, followed by the host and the process id of the build that writes it.
@@ -80,10 +81,6 @@ def open_scratch(directory: str | os.PathLike[str], schema: str) -> tuple[Path, 
     return Path(name), con
 
 
-def _pickled(o: Any) -> bytes:
-    return pickle.dumps(o, protocol=pickle.HIGHEST_PROTOCOL)
-
-
 class ReadScratch:
     """A scratch file in ``directory`` of named lists of objects (pickled) by position: appended to and read
     back in order, or put and got at given positions.
@@ -119,13 +116,17 @@ class ReadScratch:
     def extend(self, name: str, objects: Iterable[Any]) -> None:
         """Append ``objects`` to list ``name``."""
         start = self._counts.get(name, 0)
-        rows = [(name, start + k, _pickled(o)) for k, o in enumerate(objects)]
+        rows = [(name, start + k, pickled(o)) for k, o in enumerate(objects)]
         self._insert(rows)
         self._counts[name] = start + len(rows)
 
     def put_many(self, name: str, items: Iterable[tuple[int, Any]]) -> None:
         """Keep objects at given positions of list ``name``, replacing what was there."""
-        rows = [(name, int(i), _pickled(o)) for i, o in items]
+        self.put_payloads(name, ((i, pickled(o)) for i, o in items))
+
+    def put_payloads(self, name: str, items: Iterable[tuple[int, bytes]]) -> None:
+        """Keep objects already pickled (``engine.payloads.pickled``) at given positions of list ``name``."""
+        rows = [(name, int(i), bytes(blob)) for i, blob in items]
         self._insert(rows)
         self._counts[name] = max([self._counts.get(name, 0), *(i + 1 for _, i, _ in rows)])
 
@@ -135,10 +136,14 @@ class ReadScratch:
 
     def read_range(self, name: str, start: int, stop: int) -> list[Any]:
         """Objects ``start`` .. ``stop`` - 1 of list ``name``."""
+        return [pickle.loads(blob) for blob in self.range_payloads(name, start, stop)]
+
+    def range_payloads(self, name: str, start: int, stop: int) -> list[bytes]:
+        """Objects ``start`` .. ``stop`` - 1 of list ``name`` as stored (pickles, for a worker to open)."""
         rows = self._con.execute(
             "SELECT blob FROM items WHERE list = ? AND seq >= ? AND seq < ? ORDER BY seq", (name, start, stop)
         )
-        return [pickle.loads(blob) for (blob,) in rows]
+        return [blob for (blob,) in rows]
 
     def read(self, name: str, batch: int = READ_BATCH) -> Iterator[Any]:
         """Every object of list ``name`` in order, ``batch`` read at a time (1 for big objects)."""
@@ -208,6 +213,16 @@ class ScratchContours(Sequence[Contour]):
     def __iter__(self) -> Iterator[Contour]:
         return self.scratch.read(self.name)
 
+    def payloads(self, indices: Sequence[int]) -> list[bytes]:
+        """Contours ``indices`` as stored (pickles): what a task takes to a worker unopened
+        (``engine.types.contour_payloads``); a run of consecutive ones in one range read."""
+        wanted = [int(i) for i in indices]
+        if not wanted:
+            return []
+        if wanted == list(range(wanted[0], wanted[0] + len(wanted))):
+            return self.scratch.range_payloads(self.name, wanted[0], wanted[-1] + 1)
+        return self.scratch.payloads(self.name, wanted)
+
 
 class DiskSpool:
     """A build's surfaces by number, in a scratch file in ``directory`` (the store's, so on the same disk):
@@ -237,6 +252,13 @@ class DiskSpool:
     def put_many(self, items: Iterable[tuple[int, Any]]) -> None:
         """Keep several surfaces in one statement."""
         self._scratch.put_many(self.LIST, items)
+
+    #: Surfaces are kept as pickles: a worker sends them back pickled (``engine.payloads.pickled``).
+    keeps_pickles = True
+
+    def put_payloads(self, items: Iterable[tuple[int, Any]]) -> None:
+        """Keep several surfaces a worker has pickled (bytes), as they are."""
+        self._scratch.put_payloads(self.LIST, items)
 
     def get(self, indices: Sequence[int]) -> list[Any]:  # noqa: D102
         return [pickle.loads(blob) for blob in self.get_payloads(indices)]

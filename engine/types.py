@@ -99,6 +99,18 @@ class ContourSubset(Sequence[Contour]):
         for start in range(0, len(self), self.BATCH):
             yield from self[start : start + self.BATCH]
 
+    def payloads(self, indices: Sequence[int]) -> list[Contour | bytes]:
+        """Contours ``indices`` as the underlying sequence keeps them (see :func:`contour_payloads`)."""
+        return contour_payloads(self.contours, self.positions[np.asarray(indices, dtype=np.int64)].tolist())
+
+
+def contour_payloads(contours: Sequence[Contour], indices: Sequence[int]) -> list[Contour | bytes]:
+    """Contours ``indices`` of a sequence as it keeps them: the pickles of contours waiting on disk
+    (``engine.scratch.ScratchContours``), unopened, or the contours themselves; a task takes them to a
+    worker, which opens them (``engine.payloads.opened``)."""
+    take = getattr(contours, "payloads", None)
+    return take(indices) if take is not None else [contours[int(i)] for i in indices]
+
 
 @dataclass(frozen=True)
 class BadFeature:

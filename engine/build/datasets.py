@@ -31,6 +31,7 @@ from engine.io.dem import DEM_SUFFIXES, source_uphill_side
 from engine.io.source import Source, read_source, source_file
 from engine.parallel import map_ordered
 from engine.params import BuildParams
+from engine.payloads import opened
 from engine.scratch import DiskSpool, ReadScratch
 from engine.store.records import DatasetInfo
 from engine.store.schema import STORE_FORMAT
@@ -290,10 +291,11 @@ def _shards_in_batches(built: BuiltSet | SpooledSet, executor: Executor | None =
     yield from map_ordered(executor, batch_shard, tasks, SAVE_AHEAD)
 
 
-def batch_shard(payloads: Sequence[CCS | bytes], working_crs: str, inputs: Sequence[Contour]) -> Shard:
+def batch_shard(payloads: Sequence[CCS | bytes], working_crs: str, inputs: Sequence[Contour | bytes]) -> Shard:
     """One batch of surfaces as the spool keeps them, made into store rows (:func:`contour_rows`) and written
-    into a shard: a task of a worker, which opens the surfaces itself, so the build process only merges."""
-    return write_shard(contour_rows([surface_of(p) for p in payloads], working_crs, inputs))
+    into a shard: a task of a worker, which opens the surfaces and their input contours (as the reader keeps
+    them) itself, so the build process only merges."""
+    return write_shard(contour_rows([surface_of(p) for p in payloads], working_crs, [opened(c) for c in inputs]))
 
 
 def build_dataset(

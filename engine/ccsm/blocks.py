@@ -78,29 +78,19 @@ class PieceIndex:
 
     def put(self, numbers: Sequence[int], surfaces: Sequence[CCS]) -> None:
         """Index ``surfaces`` as numbers ``numbers`` (one vectorised pass for them all)."""
-        if not len(surfaces):
+        self.put_boxes(numbers, piece_boxes(surfaces))
+
+    def put_boxes(self, numbers: Sequence[int], boxes: PieceBoxes) -> None:
+        """Index the pieces of surfaces, found by :func:`piece_boxes` (where they were built), as ``numbers``."""
+        if not len(numbers):
             return
         numbers_arr = np.asarray(numbers, dtype=np.int32)
-        sizes = np.array([len(s.base) for s in surfaces], dtype=np.intp)
-        first, last, owner = piece_ranges(sizes, INDEX_PIECE_SEGMENTS)
-        base = np.concatenate([s.base for s in surfaces])
-        top = np.concatenate([s.top for s in surfaces])
-        lo = _round(per_piece(np.minimum, np.minimum(base, top), first, last), -np.inf)
-        hi = _round(per_piece(np.maximum, np.maximum(base, top), first, last), np.inf)
-        offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
         top_number = int(numbers_arr.max()) + 1
         if top_number > len(self._version):
             self._version = np.concatenate([self._version, np.zeros(top_number - len(self._version), np.int32)])
         self._stale += int(np.count_nonzero(self._version[numbers_arr]))  # their old pieces are left out later
         self._version[numbers_arr] += 1
-        self._segments.append(
-            (
-                np.hstack([lo, hi]),
-                (first - offsets[owner]).astype(np.int32),
-                (last - offsets[owner]).astype(np.int32),
-                numbers_arr[owner],
-            )
-        )
+        self._segments.append((boxes.boxes, boxes.first, boxes.last, numbers_arr[boxes.owner]))
 
     def arrays(
         self,
@@ -129,6 +119,38 @@ class PieceIndex:
         merged = tuple(np.concatenate([seg[k] for seg in self._segments])[keep] for k in range(4))
         self._segments = [merged]  # type: ignore[list-item]
         self._stale = 0
+
+
+@dataclass(frozen=True)
+class PieceBoxes:
+    """The pieces of a few surfaces, as :class:`PieceIndex` keeps them: (k, 4) float32 swept boxes, each piece's
+    first and last row in its surface, and its surface's position among the few (all int32). Found where the
+    surfaces are built, so the build process indexes them without opening the surfaces."""
+
+    boxes: NDArray[np.float32]
+    first: NDArray[np.int32]
+    last: NDArray[np.int32]
+    owner: NDArray[np.int32]
+
+
+def piece_boxes(surfaces: Sequence[CCS]) -> PieceBoxes:
+    """The pieces of ``surfaces`` and their swept boxes (one vectorised pass for them all)."""
+    if not len(surfaces):
+        empty = np.zeros(0, dtype=np.int32)
+        return PieceBoxes(np.zeros((0, 4), np.float32), empty, empty, empty)
+    sizes = np.array([len(s.base) for s in surfaces], dtype=np.intp)
+    first, last, owner = piece_ranges(sizes, INDEX_PIECE_SEGMENTS)
+    base = np.concatenate([s.base for s in surfaces])
+    top = np.concatenate([s.top for s in surfaces])
+    lo = _round(per_piece(np.minimum, np.minimum(base, top), first, last), -np.inf)
+    hi = _round(per_piece(np.maximum, np.maximum(base, top), first, last), np.inf)
+    offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    return PieceBoxes(
+        np.hstack([lo, hi]),
+        (first - offsets[owner]).astype(np.int32),
+        (last - offsets[owner]).astype(np.int32),
+        owner.astype(np.int32),
+    )
 
 
 def _round(values: NDArray[np.float64], direction: float) -> NDArray[np.float32]:
@@ -256,9 +278,7 @@ class _Buckets:
     def near(self, boxes: NDArray[np.floating]) -> NDArray[np.intp]:
         """Sorted indices of the pieces filed in any cell that one of ``boxes`` overlaps."""
         cells = np.unique(self._cells_of(boxes)[0])
-        return np.unique(
-            self.pieces[concatenated_ranges(self.start[cells], self.start[cells + 1] - self.start[cells])]
-        )
+        return np.unique(self.pieces[concatenated_ranges(self.start[cells], self.start[cells + 1] - self.start[cells])])
 
 
 def _block(

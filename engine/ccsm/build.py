@@ -16,7 +16,15 @@ import numpy as np
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
-from engine.ccsm.blocks import NearCache, PieceIndex, find_crossings_by_block, input_touches, surface_boxes
+from engine.ccsm.blocks import (
+    NearCache,
+    PieceBoxes,
+    PieceIndex,
+    find_crossings_by_block,
+    input_touches,
+    piece_boxes,
+    surface_boxes,
+)
 from engine.ccsm.ccs import CCS, check_contour, slice_area
 from engine.ccsm.contour_issues import build_or_keep_input, nothing_to_serve
 from engine.ccsm.regression import ScaleModel, fit_scale_model
@@ -26,8 +34,9 @@ from engine.geom.polyline import ring_areas
 from engine.heap import keep_big_buffers_out_of_the_heap, release_free_memory
 from engine.parallel import local_pool, map_ordered
 from engine.params import BuildParams
+from engine.payloads import opened, pickled
 from engine.tolerances import MIN_VISIBLE_RING_SIDE_M
-from engine.types import BadFeature, Contour, ContourSet, ContourSubset
+from engine.types import BadFeature, Contour, ContourSet, ContourSubset, contour_payloads
 
 #: Called with (contours done, contours in total) as the build goes.
 ProgressCallback = Callable[[int, int], None]
@@ -99,17 +108,65 @@ def vanish_scale(ccs: CCS, model: ScaleModel) -> float:
 
 
 def _build_chunk(
-    contours: Sequence[Contour],
+    contours: Sequence[Contour | bytes],
     labels: Sequence[int],
     params: BuildParams,
     model: ScaleModel,
     factors: Sequence[float] | None = None,
 ) -> list[CCS | BadFeature]:
+    """The surface of each contour (as the reader keeps it: opened here, on the worker) at its factor."""
     out: list[CCS | BadFeature] = []
     factors = factors if factors is not None else [1.0] * len(contours)
     for contour, group, factor in zip(contours, labels, factors, strict=True):
-        out.append(build_or_keep_input(contour, int(group), params, model, factor))
+        out.append(build_or_keep_input(opened(contour), int(group), params, model, factor))
     return out
+
+
+@dataclass(frozen=True)
+class KeptChunk:
+    """A chunk's surfaces as the spool keeps them, and what the build process needs of them without opening
+    them: their boxes and their pieces' boxes (for the crossing repair's blocks).
+
+    Attributes
+    ----------
+    built
+        Position in the chunk of each surface (the others are in ``failed``).
+    payloads
+        The surfaces, pickled for a spool that keeps pickles, else as they are.
+    failed
+        The chunk's contours that could not carry a surface.
+    bounds
+        (k, 4) box of each surface (:func:`~engine.ccsm.blocks.surface_boxes`).
+    pieces
+        Their pieces (:func:`~engine.ccsm.blocks.piece_boxes`).
+    """
+
+    built: list[int]
+    payloads: list[CCS | bytes]
+    failed: list[BadFeature]
+    bounds: NDArray[np.float64]
+    pieces: PieceBoxes
+
+
+def _build_kept_chunk(
+    contours: Sequence[Contour | bytes],
+    labels: Sequence[int],
+    params: BuildParams,
+    model: ScaleModel,
+    pickle_surfaces: bool,
+) -> KeptChunk:
+    """The first build of a chunk, as a worker sends it back (:class:`KeptChunk`): the contours come as the
+    reader keeps them and are opened here, the surfaces go back as the spool keeps them, so the build process
+    neither opens nor pickles either (``engine.payloads``)."""
+    results = _build_chunk(contours, labels, params, model)
+    surfaces = [r for r in results if isinstance(r, CCS)]
+    return KeptChunk(
+        built=[k for k, r in enumerate(results) if isinstance(r, CCS)],
+        payloads=[pickled(s) for s in surfaces] if pickle_surfaces else list(surfaces),
+        failed=[r for r in results if isinstance(r, BadFeature)],
+        bounds=surface_boxes(surfaces),
+        pieces=piece_boxes(surfaces),
+    )
 
 
 def _pool(executor: Executor | None, workers: int, chunks: int) -> AbstractContextManager[Executor | None]:
@@ -159,13 +216,13 @@ class SpooledSet:
     interval: float | None
     repaired: int
 
-    def payloads_in_batches(self, size: int) -> Iterator[tuple[Sequence[CCS | bytes], list[Contour]]]:
+    def payloads_in_batches(self, size: int) -> Iterator[tuple[Sequence[CCS | bytes], list[Contour | bytes]]]:
         """The surfaces in input order as the spool keeps them (:meth:`Spool.get_payloads`, sent to a worker
         without this process opening them) with their input contours, ``size`` at a time (only one batch of
         each is read into memory)."""
         for start in range(0, self.count, size):
             stop = min(self.count, start + size)
-            yield self.spool.get_payloads(range(start, stop)), list(self.inputs[start:stop])
+            yield self.spool.get_payloads(range(start, stop)), contour_payloads(self.inputs, range(start, stop))
 
 
 def build_contour_set(
@@ -240,7 +297,16 @@ def build_into(
     model, labels = fit_scale_model(contours, params)
     workers = default_workers() if workers is None else max(1, workers)
     starts = range(0, len(contours), CHUNK)
-    tasks = ((contours[i : i + CHUNK], labels[i : i + CHUNK].tolist(), params, model) for i in starts)
+    tasks = (
+        (
+            contour_payloads(contours, range(i, min(i + CHUNK, len(contours)))),
+            labels[i : i + CHUNK].tolist(),
+            params,
+            model,
+            spool.keeps_pickles,
+        )
+        for i in starts
+    )
     built: list[int] = []  # index into ``contours`` of each surface, by its number in the spool
     boxes: list[NDArray[np.float64]] = []  # (k, 4) boxes of each chunk's surfaces
     pieces = PieceIndex()  # the surfaces' pieces, for the repair's blocks
@@ -252,14 +318,13 @@ def build_into(
     # A given executor (a Dask cluster) runs the very same chunks and repair tasks; it is the caller's to shut
     # down. The local pool stays open through the crossing repair, whose checks and rebuilds it runs too.
     with _pool(executor, workers, len(starts)) as pool:
-        for start, results in zip(starts, map_ordered(pool, _build_chunk, tasks), strict=True):
-            surfaces = [(start + k, r) for k, r in enumerate(results) if isinstance(r, CCS)]
-            failed.extend(r for r in results if isinstance(r, BadFeature))
-            numbered = [(len(built) + k, s) for k, (_, s) in enumerate(surfaces)]
-            spool.put_many(numbered)
-            pieces.put([k for k, _ in numbered], [s for _, s in numbered])
-            built.extend(i for i, _ in surfaces)
-            boxes.append(np.array([s.bounds for _, s in surfaces], dtype=np.float64).reshape(-1, 4))
+        for start, chunk in zip(starts, map_ordered(pool, _build_kept_chunk, tasks), strict=True):
+            failed.extend(chunk.failed)
+            numbers = range(len(built), len(built) + len(chunk.built))
+            spool.put_payloads(zip(numbers, chunk.payloads, strict=True))
+            pieces.put_boxes(numbers, chunk.pieces)
+            built.extend(start + k for k in chunk.built)
+            boxes.append(chunk.bounds)
             if progress:
                 progress(min(start + CHUNK, total), total)
         inputs = ContourSubset(contours, built)  # the input of each surface, by its number
@@ -417,7 +482,7 @@ def _rebuild(
     they come (a round can rebuild thousands: neither their inputs nor their surfaces are held at once)."""
     tasks = (
         (
-            [inputs[i] for i, _ in todo[k : k + REPAIR_CHUNK]],
+            contour_payloads(inputs, [i for i, _ in todo[k : k + REPAIR_CHUNK]]),
             [labels[i] for i, _ in todo[k : k + REPAIR_CHUNK]],
             params,
             model,

@@ -11,11 +11,11 @@ Only the protocol and the in-memory form live here: the disk form is a list of t
 
 from __future__ import annotations
 
-import pickle
 from collections.abc import Iterable, Sequence
 from typing import Protocol
 
 from engine.ccsm.ccs import CCS
+from engine.payloads import opened
 
 
 class Spool(Protocol):
@@ -32,6 +32,13 @@ class Spool(Protocol):
 
     def get_payloads(self, indices: Sequence[int]) -> Sequence[CCS | bytes]:
         """The same surfaces in the form they are kept, for a worker to open with :func:`surface_of`."""
+
+    #: Whether the spool keeps pickles: then a worker sends its surfaces back pickled
+    #: (``engine.payloads.pickled``) and :meth:`put_payloads` keeps them as they come.
+    keeps_pickles: bool
+
+    def put_payloads(self, items: Iterable[tuple[int, CCS | bytes]]) -> None:
+        """Keep several (number, surface) in the form the spool keeps them (see :attr:`keeps_pickles`)."""
 
     def close(self) -> None:
         """Free what the spool holds."""
@@ -55,11 +62,15 @@ class MemorySpool:
     def get_payloads(self, indices: Sequence[int]) -> list[CCS]:  # noqa: D102
         return self.get(indices)
 
+    keeps_pickles = False
+
+    def put_payloads(self, items: Iterable[tuple[int, CCS | bytes]]) -> None:  # noqa: D102
+        self._surfaces.update((i, surface_of(p)) for i, p in items)
+
     def close(self) -> None:  # noqa: D102
         self._surfaces.clear()
 
 
 def surface_of(payload: CCS | bytes) -> CCS:
     """A surface from what :meth:`Spool.get_payloads` gave (a pickle from a spool on disk)."""
-    return pickle.loads(payload) if isinstance(payload, bytes) else payload
-
+    return opened(payload)

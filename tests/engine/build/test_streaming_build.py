@@ -189,8 +189,53 @@ def test_a_local_build_makes_its_rows_and_label_candidates_on_its_own_pool(tmp_p
     build_dataset(CCSStore(tmp_path / "s.sqlite"), SourceSpec(dem, "t", "t", interval=10.0), workers=2)
     assert len(pools) == 1, "one pool for the whole build"
     ran = pools[0].ran
-    assert ran.count("_build_chunk") > 1, ran
+    assert ran.count("_build_kept_chunk") > 1, ran
     assert ran.count("batch_shard") > 1 and ran.count("batch_candidates") > 1, ran
+
+
+def test_the_build_process_forwards_contours_and_surfaces_without_opening_them(tmp_path, monkeypatch) -> None:
+    # Issue 26: where the build process only passes a contour on (to a chunk's or a shard's task) or a surface
+    # (from a chunk's task to the spool), opening and pickling it again was serial work on the hub of the build.
+    # It opens each contour for its own checks and the scale model only, and pickles only the repair's rebuilds.
+    import engine.io.cleaning as cleaning
+    import engine.scratch as scratch
+    from engine.ccsm.ccs import CCS
+    from engine.ccsm.regression import REFERENCES_PER_GROUP
+
+    here = os.getpid()  # the pool's processes are forked from this one, with the counters patched in
+    opened: list[int] = []
+    pickled_factors: list[float] = []
+    read_range, pickled = scratch.ReadScratch.read_range, scratch.pickled
+
+    def counting_read_range(self, name, start, stop):  # noqa: ANN001, ANN202
+        got = read_range(self, name, start, stop)
+        if os.getpid() == here and name == cleaning.CONTOURS_LIST:
+            opened.extend(range(start, start + len(got)))
+        return got
+
+    def counting_pickled(obj):  # noqa: ANN001, ANN202
+        if os.getpid() == here and isinstance(obj, CCS):
+            pickled_factors.append(obj.tolerance_factor)
+        return pickled(obj)
+
+    monkeypatch.setattr(scratch.ReadScratch, "read_range", counting_read_range)
+    monkeypatch.setattr(scratch, "pickled", counting_pickled)
+    z = fractal_heights(11, 3.0, n=64, relief_m=200.0).astype(np.float32)
+    dem = write_geotiff(tmp_path / "t.tif", z, west=740_000.0, north=4_060_000.0, cell=30.0, crs="EPSG:32616")
+    store = CCSStore(tmp_path / "s.sqlite")
+    info, _ = build_dataset(store, SourceSpec(dem, "t", "t", interval=10.0), workers=2)
+    contours = info.n_contours
+    assert contours > 2 * 64, "more than two chunks"
+    # Each contour is opened here at most twice (checked, then described for the scale model) and the scale
+    # model's reference contours once more, not again for its chunk, its rebuilds or its shard; only rebuilt
+    # surfaces (a finer target, factor < 1) are pickled here.
+    references = BuildParams().groups * REFERENCES_PER_GROUP
+    assert len(opened) <= 2 * contours + references, (len(opened), contours)
+    assert all(f < 1.0 for f in pickled_factors), sorted(set(pickled_factors))
+    # What the workers sent is what a build in one process stores.
+    alone = CCSStore(tmp_path / "alone.sqlite")
+    build_dataset(alone, SourceSpec(dem, "t", "t", interval=10.0), workers=1)
+    assert stored_rows(store, "t") == stored_rows(alone, "t")
 
 
 def test_a_failing_build_removes_its_scratch_file_and_keeps_the_stored_version(

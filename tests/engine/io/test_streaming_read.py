@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from synthetic_rasters import fractal_heights, write_geotiff
 
 from engine.ccsm.blocks import PieceIndex
@@ -17,8 +19,9 @@ from engine.ccsm.build import build_contour_set
 from engine.io.source import read_source
 from engine.parallel import map_ordered
 from engine.params import BuildParams
+from engine.payloads import opened
 from engine.scratch import SCRATCH_PREFIX, ReadScratch, ScratchContours
-from engine.types import Contour, ContourSet, ContourSubset
+from engine.types import Contour, ContourSet, ContourSubset, contour_payloads
 from tests.engine.ccsm.test_blocks import ring_clusters
 
 WEST, NORTH, CELL = 740_000.0, 4_060_000.0, 30.0
@@ -117,6 +120,40 @@ def test_a_contour_subset_reads_as_the_list_it_stands_for() -> None:
     for s in (slice(0, 3), slice(2, 6), slice(5, 50), slice(4, 4), slice(None, None, 2)):
         assert subset[s] == expected[s]
     assert subset[-1] is contours[19] and subset[3] is contours[6]
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    count=st.integers(0, 40),
+    data=st.data(),
+)
+def test_contour_payloads_are_the_contours_a_read_gives_as_stored(tmp_path_factory, count, data) -> None:
+    # What a build forwards to a worker unopened must open to the very contour an ordinary read gives, for any
+    # positions (a chunk's run, the repair's scattered rebuilds), through a subset of a subset as a build has.
+    contours = [
+        Contour(f"c{k}", float(k), np.arange(2 * (k + 2), dtype=np.float64).reshape(-1, 2), k % 3 == 0)
+        for k in range(count)
+    ]
+    outer = sorted(data.draw(st.sets(st.integers(0, max(0, count - 1)), max_size=count)) if count else [])
+    inner = sorted(data.draw(st.sets(st.integers(0, max(0, len(outer) - 1)), max_size=len(outer))) if outer else [])
+    wanted = data.draw(st.lists(st.integers(0, max(0, len(inner) - 1)), max_size=12) if inner else st.just([]))
+    scratch = ReadScratch(tmp_path_factory.mktemp("payloads"))
+    try:
+        scratch.extend("contours", contours)
+        for source in (contours, ScratchContours(scratch, "contours")):
+            subset = ContourSubset(ContourSubset(source, outer), inner)
+            got = contour_payloads(subset, wanted)
+            expected = [contours[outer[inner[w]]] for w in wanted]
+            assert all(isinstance(p, bytes) for p in got) == (source is not contours or not got)
+            for payload, contour in zip(got, expected, strict=True):
+                back = opened(payload)
+                assert (back.id, back.elevation, back.closed) == (contour.id, contour.elevation, contour.closed)
+                np.testing.assert_array_equal(back.coords, contour.coords)
+            assert len(got) == len(expected)
+            run = list(range(len(inner)))  # a chunk's consecutive run, read in one range
+            assert [opened(p).id for p in contour_payloads(subset, run)] == [c.id for c in subset]
+    finally:
+        scratch.close()
 
 
 def test_the_piece_index_after_rebuilds_is_that_of_the_final_surfaces() -> None:
