@@ -12,6 +12,7 @@ kept only if its screen box does not meet a kept one at the zoom both are first 
 
 from __future__ import annotations
 
+import bisect
 import logging
 import math
 from collections import deque
@@ -171,18 +172,40 @@ def contour_candidates(
     s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(base, axis=0).T))])
     at = s[cand]
     spacing = style.spacing_px * metres_per_px(first)  # metres of line, at each candidate's first zoom
-    taken = np.zeros(len(cand), dtype=bool)
-    for j in np.lexsort((-score, first)).tolist():
-        kept = np.flatnonzero(taken)
-        # both show from the later of their first zooms, where the spacing in metres is the smaller one
-        if not (np.abs(at[kept] - at[j]) < np.minimum(spacing[kept], spacing[j])).any():
-            taken[j] = True
+    taken = spaced_along(at, first, score, spacing)
     pick = np.flatnonzero(taken)
     rows = cand[pick]
     half = label_px * metres_per_px(first[pick]) / 2
     ends = [np.clip(s[rows] + sign * half, 0.0, s[-1]) for sign in (-1.0, 1.0)]
     dx, dy = (np.interp(ends[1], s, base[:, i]) - np.interp(ends[0], s, base[:, i]) for i in (0, 1))
     return base[rows], orient_angle(dx, dy, src.uphill), score[pick], first[pick]
+
+
+def spaced_along(
+    at: NDArray[np.float64], first: NDArray[np.float64], score: NDArray[np.float64], spacing: NDArray[np.float64]
+) -> NDArray[np.bool_]:
+    """Which candidates along one line to take: greedily, earlier-shown then straighter first, each unless a
+    taken one lies nearer along the line than the spacing at the zoom both show (the later first zoom's, where
+    the spacing, ``spacing`` metres at each candidate's first zoom, is the smaller).
+
+    In that order the zoom both show is always the candidate's own (none taken before it shows later), so only
+    the taken candidates nearest along the line, on either side, can be too close: they are kept sorted. (A long
+    contour has thousands of candidates; testing each against every taken one had been a tenth of a build.)
+
+    >>> spaced_along(np.array([0.0, 5.0, 12.0]), np.zeros(3), np.array([1.0, 0.9, 0.8]), np.full(3, 10.0)).tolist()
+    [True, False, True]
+    """
+    taken = np.zeros(len(at), dtype=bool)
+    taken_at: list[float] = []
+    positions, gaps = at.tolist(), spacing.tolist()
+    for j in np.lexsort((-score, first)).tolist():
+        k = bisect.bisect_left(taken_at, positions[j])
+        after = k < len(taken_at) and taken_at[k] - positions[j] < gaps[j]
+        before = k > 0 and positions[j] - taken_at[k - 1] < gaps[j]
+        if not (after or before):
+            taken[j] = True
+            taken_at.insert(k, positions[j])
+    return taken
 
 
 def box_px(text_len: NDArray[np.int64], angle_deg: NDArray[np.float64], style: LabelStyle) -> NDArray[np.float64]:

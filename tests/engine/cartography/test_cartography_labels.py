@@ -5,9 +5,18 @@ import math
 import mapbox_vector_tile
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from engine.cartography.dataset import DatasetCartography
-from engine.cartography.labels import LabelSource, LabelStyle, metres_per_px, place_labels, upright_angle
+from engine.cartography.labels import (
+    LabelSource,
+    LabelStyle,
+    metres_per_px,
+    place_labels,
+    spaced_along,
+    upright_angle,
+)
 from engine.cartography.options import CartographyOptions
 from engine.cartography.schedule import make_schedule
 from engine.tiles.mvt import encode_line_tile, encode_point_tile
@@ -177,3 +186,30 @@ def test_labels_placed_from_sources_read_once_in_a_stream_are_those_placed_from_
     assert streamed.fid.tolist() == from_list.fid.tolist() and len(streamed) > 0
     np.testing.assert_array_equal(streamed.xy, from_list.xy)
     assert streamed.text == from_list.text and streamed.elevation.tolist() == from_list.elevation.tolist()
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            st.floats(0.0, 5_000.0, allow_nan=False),  # metres along the line
+            st.integers(0, 64),  # first zoom, in quarter zooms from z10
+            st.floats(0.5, 1.0),  # straightness
+        ),
+        max_size=60,
+    ),
+    st.sampled_from([0.0, 50.0, 600.0]),
+)
+def test_labels_along_a_line_are_spaced_as_by_testing_every_pair(candidates, spacing_px) -> None:
+    # The greedy spacing of one contour's labels looks only at the nearest taken labels; it must take exactly
+    # what testing each candidate against every taken one, at the later of their first zooms, takes.
+    at = np.array([c[0] for c in candidates], dtype=np.float64)
+    first = 10.0 + np.array([c[1] for c in candidates], dtype=np.float64) / 4
+    score = np.array([c[2] for c in candidates], dtype=np.float64)
+    spacing = spacing_px * metres_per_px(first)
+    expected = np.zeros(len(at), dtype=bool)
+    for j in sorted(range(len(at)), key=lambda k: (first[k], -score[k])):
+        both_show = np.maximum(first[expected], first[j])
+        if not (np.abs(at[expected] - at[j]) < spacing_px * metres_per_px(both_show)).any():
+            expected[j] = True
+    assert spaced_along(at, first, score, spacing).tolist() == expected.tolist()
