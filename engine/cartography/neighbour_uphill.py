@@ -37,18 +37,19 @@ def nearest_crossed(
     lines: Sequence[NDArray[np.float64]],
     elevations: NDArray[np.float64],
     probe_m: float = PROBE_M,
-) -> NDArray[np.float64]:
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(n,) elevation of the first of ``lines`` each probe crosses (from ``start`` + ``PROBE_START_M`` along
-    ``direction`` for ``probe_m``), NaN where it crosses none."""
+    ``direction`` for ``probe_m``), NaN where it crosses none; and (n,) how far along the probe that is (inf)."""
     out = np.full(len(start), np.nan)
+    far = np.full(len(start), np.inf)
     if not len(start):
-        return out
+        return out, far
     a = start + PROBE_START_M * direction
     b = start + probe_m * direction
     probes = shapely.linestrings(np.stack([a, b], axis=1))
     keep = [k for k, line in enumerate(lines) if len(line) >= 2]
     if not keep:
-        return out
+        return out, far
     elevations = np.asarray(elevations, dtype=np.float64)[keep]
     counts = np.array([len(lines[k]) for k in keep])
     geoms = shapely.linestrings(
@@ -57,13 +58,14 @@ def nearest_crossed(
     tree = shapely.STRtree(geoms)
     probe_i, line_i = tree.query(probes, predicate="intersects")
     if not len(probe_i):
-        return out
+        return out, far
     hits = shapely.intersection(probes[probe_i], geoms[line_i])
     along = shapely.distance(shapely.points(a[probe_i]), hits)
     order = np.lexsort((along, probe_i))  # by probe, nearest first
     first = order[np.r_[True, probe_i[order][1:] != probe_i[order][:-1]]]
     out[probe_i[first]] = elevations[line_i[first]]
-    return out
+    far[probe_i[first]] = along[first] + PROBE_START_M
+    return out, far
 
 
 def top_uphill(
@@ -78,8 +80,8 @@ def top_uphill(
     on its text's top side, -1 where it is on its foot side, 0 where the neighbouring ``lines`` (every line
     near the labels, their own included) do not tell."""
     up = text_top(angle_deg)
-    above = nearest_crossed(xy, up, lines, line_elevations, probe_m)
-    below = nearest_crossed(xy, -up, lines, line_elevations, probe_m)
+    above, _ = nearest_crossed(xy, up, lines, line_elevations, probe_m)
+    below, _ = nearest_crossed(xy, -up, lines, line_elevations, probe_m)
     with np.errstate(invalid="ignore"):
         from_top = np.sign(above - elevation)  # NaN (no line) and 0 (its own level) tell nothing
         from_foot = np.sign(elevation - below)

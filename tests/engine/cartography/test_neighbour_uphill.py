@@ -20,7 +20,7 @@ from terrain_strategies import TerrainCase, terrains
 
 from engine.build.datasets import SourceSpec, build_dataset
 from engine.cartography.labels import UPSIDE_DOWN_LIMIT_DEG, upright_angle
-from engine.cartography.neighbour_uphill import text_top, top_uphill
+from engine.cartography.neighbour_uphill import nearest_crossed, text_top, top_uphill
 from engine.cartography.options import CartographyOptions
 from engine.io.dem import contours_from_dem, read_dem
 from engine.io.dem_tracing import LEVEL_OFFSET, iter_levels
@@ -76,8 +76,25 @@ def test_the_side_of_higher_ground_is_the_dem_s_on_generated_terrain(case: Terra
     top, foot = dem(xy_a + step), dem(xy_a - step)
     diff = top - foot
     # Checked where the DEM has the label's level between its two sides (in a saddle cell the bilinear DEM and
-    # the tracer's cell-by-cell choice can see the same side of the level on both).
-    told = (signs != 0) & np.isfinite(diff) & ((top - own_a) * (foot - own_a) < 0)
+    # the tracer's cell-by-cell choice can see the same side of the level on both), and where the ground between
+    # the label and the first line each probe meets is known: lines alone cannot tell a probe that passes a
+    # hole of nodata (a line beyond it need not be a neighbour of the label's).
+    holes = np.isnan(filled).astype(np.float64)
+
+    def crosses_nodata(direction: np.ndarray) -> np.ndarray:
+        _, far = nearest_crossed(xy_a, direction, lines, np.array(heights))
+        reach = np.minimum(far, np.hypot(*filled.shape) * CELL_M)
+        out = np.zeros(len(xy_a), dtype=bool)
+        for k in range(len(xy_a)):
+            along = np.arange(0.0, reach[k] + CELL_M / 4, CELL_M / 4)
+            points = (xy_a[k] + along[:, None] * direction[k]) / CELL_M
+            inside = (points >= 0).all(axis=1) & (points <= np.array(filled.shape[::-1]) - 1).all(axis=1)
+            wet = ndimage.map_coordinates(holes, [points[inside, 1], points[inside, 0]], order=1)
+            out[k] = bool((wet > 0).any())
+        return out
+
+    known = ~(crosses_nodata(text_top(angle_a)) | crosses_nodata(-text_top(angle_a)))
+    told = (signs != 0) & np.isfinite(diff) & ((top - own_a) * (foot - own_a) < 0) & known
     assert (np.sign(diff[told]) == signs[told]).all(), (case, diff[told], signs[told])
     if len(set(heights)) >= 3 and len(xy) >= 4:
         assert (signs != 0).any()  # neighbour levels tell some labels (a small ring's probe meets itself first)
