@@ -12,6 +12,7 @@ import httpx
 import numpy as np
 import pytest
 
+from engine.store.staging import staging_id
 from engine.store.store import CCSStore
 from tests.app.conftest import REPO, LiveServer, synthetic_features, write_geojson
 from tests.app.helpers import check_tile, tile_for
@@ -53,8 +54,9 @@ def test_sample_builds_on_first_start_and_restart_serves_from_store(tmp_path):
 
 
 #: Run in the killed process: ``ccsm build`` with a page cache small enough that the new rows spill into the WAL
-#: file, and a hook in the store's merge of the build's shards that, once KILL_AFTER_RUNS runs are merged, merges
-#: one more and reports the WAL size inside that run's write transaction, then waits for the kill.
+#: file, and a hook in the store's merge of the build's shards that, once KILL_AFTER_RUNS runs are merged (and
+#: committed), merges one more and reports the WAL size inside that run's write transaction, then waits for the
+#: kill.
 KILLED_BUILD = """
 import os, signal, sys
 import engine.store.store as sq
@@ -79,6 +81,7 @@ def merge(*a):
     seen["runs"] += 1
 
 sq.CCSStore.save, sq.merge_run = save, merge
+sq.STAGE_CONTOURS = 8  # runs of a few contours: the small source's build commits some before the kill
 sys.argv = ["ccsm", *sys.argv[1:]]
 main()
 """
@@ -100,7 +103,7 @@ def test_killed_build_leaves_the_store_as_it_was(tmp_path, built_store):
         cwd=REPO,
         stdout=subprocess.PIPE,
         stderr=(tmp_path / "build.log").open("wb"),
-        env={**os.environ, "STORE": str(store), "KILL_AFTER_RUNS": "0"},
+        env={**os.environ, "STORE": str(store), "KILL_AFTER_RUNS": "1"},
     )
     try:
         assert proc.stdout is not None
@@ -124,6 +127,13 @@ def test_killed_build_leaves_the_store_as_it_was(tmp_path, built_store):
     for old, new in zip(recs_before, after.load(fids_before), strict=True):
         assert new.contour_id == old.contour_id and np.array_equal(new.base, old.base)
         assert np.array_equal(new.top, old.top) and np.array_equal(new.original, old.original)
+    # The run merged and committed before the kill waits under the build's private staging id, and nothing
+    # else of the build is anywhere: not under the dataset's own id, not under the live version's rows.
+    con = after._con()
+    live = con.execute("SELECT rows_id FROM datasets WHERE id = 'hills'").fetchone()[0]
+    held = dict(con.execute("SELECT dataset, count(*) FROM contours GROUP BY dataset").fetchall())
+    assert held.pop(live) == before.n_contours
+    assert list(held) == [staging_id("hills", live)] and held[staging_id("hills", live)] > 0, held
 
 
 def test_build_command_is_idempotent(tmp_path, synthetic_path):
