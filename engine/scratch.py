@@ -126,7 +126,7 @@ class ReadScratch:
 
     def put_payloads(self, name: str, items: Iterable[tuple[int, bytes]]) -> None:
         """Keep objects already pickled (``engine.payloads.pickled``) at given positions of list ``name``."""
-        rows = [(name, int(i), bytes(blob)) for i, blob in items]
+        rows = [(name, int(i), blob) for i, blob in items]
         self._insert(rows)
         self._counts[name] = max([self._counts.get(name, 0), *(i + 1 for _, i, _ in rows)])
 

@@ -278,7 +278,9 @@ class _Buckets:
     def near(self, boxes: NDArray[np.floating]) -> NDArray[np.intp]:
         """Sorted indices of the pieces filed in any cell that one of ``boxes`` overlaps."""
         cells = np.unique(self._cells_of(boxes)[0])
-        return np.unique(self.pieces[concatenated_ranges(self.start[cells], self.start[cells + 1] - self.start[cells])])
+        return np.unique(
+            self.pieces[concatenated_ranges(self.start[cells], self.start[cells + 1] - self.start[cells])]
+        )
 
 
 def _block(

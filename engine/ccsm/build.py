@@ -142,7 +142,7 @@ class KeptChunk:
     """
 
     built: list[int]
-    payloads: list[CCS | bytes]
+    payloads: Sequence[CCS | bytes]
     failed: list[BadFeature]
     bounds: NDArray[np.float64]
     pieces: PieceBoxes
@@ -162,7 +162,7 @@ def _build_kept_chunk(
     surfaces = [r for r in results if isinstance(r, CCS)]
     return KeptChunk(
         built=[k for k, r in enumerate(results) if isinstance(r, CCS)],
-        payloads=[pickled(s) for s in surfaces] if pickle_surfaces else list(surfaces),
+        payloads=[pickled(s) for s in surfaces] if pickle_surfaces else surfaces,
         failed=[r for r in results if isinstance(r, BadFeature)],
         bounds=surface_boxes(surfaces),
         pieces=piece_boxes(surfaces),
