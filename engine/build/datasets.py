@@ -14,7 +14,7 @@ import time
 import unicodedata
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager, nullcontext
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -24,12 +24,12 @@ from engine.build.records import contour_rows, dataset_meta
 from engine.cartography.dataset import UPHILL_SIDE_KEY
 from engine.cartography.options import PARAMS_KEY, CartographyOptions, check_schedule_fits
 from engine.cartography.units import source_units
-from engine.ccsm.build import BuiltSet, SpooledSet, build_into, build_pool
+from engine.ccsm.build import BuiltSet, SpooledSet, build_into, build_pool, default_workers
 from engine.ccsm.ccs import CCS
 from engine.ccsm.spool import surface_of
 from engine.io.dem import DEM_SUFFIXES, source_uphill_side
-from engine.io.source import Source, read_source, source_file
-from engine.parallel import map_ordered
+from engine.io.source import Source, is_dem, read_source, source_file
+from engine.parallel import local_pool, map_ordered
 from engine.params import BuildParams
 from engine.payloads import opened
 from engine.scratch import DiskSpool, ReadScratch
@@ -298,6 +298,19 @@ def batch_shard(payloads: Sequence[CCS | bytes], working_crs: str, inputs: Seque
     return write_shard(contour_rows([surface_of(p) for p in payloads], working_crs, [opened(c) for c in inputs]))
 
 
+def _reading_pool(
+    spec: SourceSpec, executor: Executor | None, workers: int | None
+) -> AbstractContextManager[Executor | None]:
+    """Where a source is read and then built: the given executor; for a DEM without one, a local pool of
+    ``workers`` processes (None: one per core) opened before the DEM is read, so that its levels or windows are
+    traced in parallel and the same processes then build its contours; for a contour file, read in this
+    process, None (its build opens its own pool, :func:`~engine.ccsm.build.build_pool`)."""
+    if executor is not None or not is_dem(spec.path):
+        return nullcontext(executor)
+    count = default_workers() if workers is None else max(1, workers)
+    return nullcontext(None) if count == 1 else local_pool(count)
+
+
 def build_dataset(
     store: CCSStore,
     spec: SourceSpec,
@@ -310,8 +323,9 @@ def build_dataset(
 ) -> tuple[DatasetInfo, bool]:
     """Read, build and store one source unless the store already holds it unchanged.
 
-    ``executor`` runs a DEM's windows and the contours' builds (a Dask cluster, see :mod:`engine.parallel`);
-    None = ``workers`` local processes. Either way the same code and the same stored rows.
+    ``executor`` traces a DEM and builds the contours (a Dask cluster, see :mod:`engine.parallel`); None =
+    ``workers`` local processes, opened before a DEM is read (:func:`_reading_pool`). Either way the same code
+    and the same stored rows.
 
     Returns
     -------
@@ -328,7 +342,7 @@ def build_dataset(
         return store.dataset(spec.dataset), False
     BuildParams(source_scale=spec.source_scale, target_scale=spec.target_scale)  # bad scales fail before reading
     params = spec.stored_params()  # bad cartography options fail before reading too
-    with read_scratch(store) as scratch:
+    with read_scratch(store) as scratch, _reading_pool(spec, executor, workers) as executor:
         contour_set = read_source(
             spec.path,
             elevation_field=spec.elevation_field,

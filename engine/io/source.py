@@ -144,6 +144,12 @@ def source_arguments(source: Source) -> tuple[str, tuple[float, float, float, fl
     return str(source), None, None
 
 
+def is_dem(source: Source) -> bool:
+    """True when ``source`` is a DEM (a raster file, an ``.npz``, a raster URL or a tile pyramid), whose lines
+    are traced as it is read; False for a contour file."""
+    return not isinstance(source, Path) or source.suffix.lower() in DEM_SUFFIXES
+
+
 def source_file(source: Source) -> Path | None:
     """The local file whose bytes a source is, or None (a URL or a tile pyramid)."""
     if isinstance(source, Path):

@@ -172,9 +172,13 @@ class RecordingPool(RecordingExecutor):
         self.inner.shutdown(wait=wait, cancel_futures=cancel_futures)
 
 
-def test_a_local_build_makes_its_rows_and_label_candidates_on_its_own_pool(tmp_path, monkeypatch) -> None:
+@pytest.mark.parametrize("source", ["dem", "lines"])
+def test_a_local_build_makes_its_rows_and_label_candidates_on_its_own_pool(
+    tmp_path, monkeypatch, clusters_source, source: str
+) -> None:
     # ccsm build --workers 2 with no cluster: the pool it opens must last to the labels, or the rows and the
-    # candidates run serially in the build process while the workers wait.
+    # candidates run serially in the build process while the workers wait; a DEM's pool opens before it is read,
+    # so its levels are traced on it too.
     import engine.ccsm.build as ccsm_build
 
     pools: list[RecordingPool] = []
@@ -184,13 +188,23 @@ def test_a_local_build_makes_its_rows_and_label_candidates_on_its_own_pool(tmp_p
         return pools[-1]
 
     monkeypatch.setattr(ccsm_build, "local_pool", recording_pool)
-    z = fractal_heights(11, 3.0, n=64, relief_m=200.0).astype(np.float32)
-    dem = write_geotiff(tmp_path / "t.tif", z, west=740_000.0, north=4_060_000.0, cell=30.0, crs="EPSG:32616")
-    build_dataset(CCSStore(tmp_path / "s.sqlite"), SourceSpec(dem, "t", "t", interval=10.0), workers=2)
+    monkeypatch.setattr(datasets, "local_pool", recording_pool)
+    if source == "dem":
+        z = fractal_heights(11, 3.0, n=64, relief_m=200.0).astype(np.float32)
+        path = write_geotiff(tmp_path / "t.tif", z, west=740_000.0, north=4_060_000.0, cell=30.0, crs="EPSG:32616")
+        spec = SourceSpec(path, "t", "t", interval=10.0)
+    else:
+        monkeypatch.setattr(ccsm_build, "CHUNK", 8)  # the 45 lines: several chunks of work, so a pool
+        spec = SourceSpec(clusters_source, "t", "t")
+    build_dataset(CCSStore(tmp_path / "s.sqlite"), spec, workers=2)
     assert len(pools) == 1, "one pool for the whole build"
     ran = pools[0].ran
     assert ran.count("_build_kept_chunk") > 1, ran
-    assert ran.count("batch_shard") > 1 and ran.count("batch_candidates") > 1, ran
+    assert ran.count("batch_shard") >= 1 and ran.count("batch_candidates") >= 1, ran
+    if source == "dem":
+        assert ran.count("batch_shard") > 1 and ran.count("batch_candidates") > 1, ran
+    # A DEM read whole is traced on the pool, a run of levels a task; a contour file is read here.
+    assert (ran.count("trace_grid_levels") > 1) == (source == "dem"), ran
 
 
 def test_the_build_process_forwards_contours_and_surfaces_without_opening_them(tmp_path, monkeypatch) -> None:
