@@ -149,8 +149,11 @@ def trace_window(
     A module-level function of plain arguments, so a worker process or a Dask worker can run it.
     """
     if isinstance(source, str):
-        with rasterio.open(source) as src:
-            z = np.ma.masked_invalid(src.read(1, window=window, masked=True).astype(np.float64))
+        try:
+            with rasterio.open(source) as src:
+                z = np.ma.masked_invalid(src.read(1, window=window, masked=True).astype(np.float64))
+        except RasterioError as exc:  # on a worker that does not see the file the build read, say so by name
+            raise SourceError(unreadable_message(Path(source), "a DEM", exc)) from exc
     else:
         z = np.ma.masked_invalid(source.read(window))
     if z.count() == 0:

@@ -103,3 +103,18 @@ def test_a_worker_refuses_a_dem_that_changed_after_the_build_read_it(tmp_path: P
         trace_grid_levels(str(path), levels, (stat.st_size, stat.st_mtime_ns))
     with pytest.raises(SourceError, match="missing.tif: the DEM cannot be read on this worker"):
         trace_grid_levels(str(tmp_path / "missing.tif"), levels, (stat.st_size, stat.st_mtime_ns))
+
+
+def test_a_window_a_worker_cannot_read_fails_with_the_file_named(tmp_path: Path) -> None:
+    from rasterio.windows import Window
+
+    from engine.io.dem_windows import trace_window
+
+    path, _ = write_terrain(tmp_path)
+    traced_window, zmin, zmax = trace_window(str(path), Window(0, 0, 40, 40), 20.0)
+    assert traced_window and zmin < zmax  # the file as the build read it
+    path.write_bytes(b"not a raster any more")
+    with pytest.raises(SourceError, match=f"{path.name}: the file could not be read as a DEM"):
+        trace_window(str(path), Window(0, 0, 40, 40), 20.0)
+    with pytest.raises(SourceError, match="gone.tif: the file could not be read as a DEM"):
+        trace_window(str(tmp_path / "gone.tif"), Window(0, 0, 40, 40), 20.0)
