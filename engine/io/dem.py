@@ -156,7 +156,7 @@ def contours_from_dem(
         grid = read_dem(path)
         crs = grid.crs
         parts = _grid_parts(path, grid, float(interval), executor)
-        del grid  # the workers read their own copy: this one is not kept while they trace
+        del grid  # with workers, each reads its own copy: this one is not kept while they trace
         batches = (batch for level_parts in parts for batch in in_batches(level_parts))
     return assemble_batches(
         batches,
@@ -345,7 +345,8 @@ def _grid_parts(path: Path, grid: DemGrid, interval: float, executor: Executor |
     stat = path.stat()
     per_task = max(MIN_LEVELS_PER_TASK, math.ceil(len(levels) / LEVEL_TASKS))
     runs = [levels[k : k + per_task].tolist() for k in range(0, len(levels), per_task)]
-    tasks = ((str(path), run, (stat.st_size, stat.st_mtime_ns)) for run in runs)
+    # The absolute path: a Dask worker runs in a directory of its own.
+    tasks = ((str(path.resolve()), run, (stat.st_size, stat.st_mtime_ns)) for run in runs)
     traced_runs = map_ordered(executor, trace_grid_levels, tasks)
     return _at_least_one((parts for run in traced_runs for parts in run), none_found)
 

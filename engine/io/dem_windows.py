@@ -234,7 +234,8 @@ def contour_windows(
     if block < 1:
         raise InvalidParameter(f"block {block} must be at least 1 cell")
     header = read_header(path) if isinstance(path, Path) else path.header()
-    source: str | WindowSource = str(path) if isinstance(path, Path) else path
+    # The absolute path: a Dask worker runs in a directory of its own.
+    source: str | WindowSource = str(path.resolve()) if isinstance(path, Path) else path
     if header.rows < 2 or header.cols < 2:
         raise SourceError(f"{path.name}: a DEM needs at least 2 x 2 cells, got {header.rows} x {header.cols}")
     tasks = ((source, w, interval) for w in windows(header, block))

@@ -118,3 +118,18 @@ def test_a_window_a_worker_cannot_read_fails_with_the_file_named(tmp_path: Path)
         trace_window(str(path), Window(0, 0, 40, 40), 20.0)
     with pytest.raises(SourceError, match="gone.tif: the file could not be read as a DEM"):
         trace_window(str(tmp_path / "gone.tif"), Window(0, 0, 40, 40), 20.0)
+
+
+def test_workers_in_another_directory_find_a_dem_named_relative_to_the_build(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A Dask worker runs in a directory of its own: a DEM named relative to the build's directory must reach it
+    # as the file the build read, for a grid read whole and one read in windows alike.
+    path, interval = write_terrain(tmp_path)
+    with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as elsewhere:
+        assert elsewhere.submit(os.getcwd).result() != str(tmp_path)  # started before the build moves
+        monkeypatch.chdir(tmp_path)
+        for block in (None, 50):
+            here = contours_from_dem(Path(path.name), interval=interval, block=block)
+            on_worker = contours_from_dem(Path(path.name), interval=interval, block=block, executor=elsewhere)
+            assert_identical(on_worker, here)
