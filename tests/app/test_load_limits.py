@@ -25,6 +25,7 @@ import httpx
 import numpy as np
 import psutil
 import pytest
+from support.processes import fork_server
 
 from app.main import create_app
 from app.render.jobs import HEAVY_NICENESS
@@ -161,10 +162,10 @@ def test_issue_10_wm_on_a_giant_line_is_refused_naming_the_limit(strict):
 
 def render_workers(server: LiveServer) -> set[int]:
     """Pids of the server's render workers: the children of its fork server."""
-    for child in psutil.Process(server.proc.pid).children():
-        if "forkserver" in " ".join(child.cmdline()):
-            return {w.pid for w in child.children() if w.status() != psutil.STATUS_ZOMBIE}
-    return set()
+    forks = fork_server(server.proc.pid)
+    if forks is None:
+        return set()
+    return {w.pid for w in forks.children() if w.status() != psutil.STATUS_ZOMBIE}
 
 
 def heavy_worker(server: LiveServer) -> psutil.Process:

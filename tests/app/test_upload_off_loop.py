@@ -16,6 +16,7 @@ from pathlib import Path
 import httpx
 import psutil
 import pytest
+from support.processes import fork_server
 
 from app.settings import Settings
 from bench.bench_upload_memory import long_line
@@ -49,10 +50,10 @@ def peak_rss_mb(pid: int) -> float:
 
 def forked_children(server: LiveServer) -> set[int]:
     """Live processes forked from the server's fork server (render workers and upload checks)."""
-    for child in psutil.Process(server.proc.pid).children():
-        if "forkserver" in " ".join(child.cmdline()):
-            return {p.pid for p in child.children() if p.status() != psutil.STATUS_ZOMBIE}
-    return set()
+    forks = fork_server(server.proc.pid)
+    if forks is None:
+        return set()
+    return {p.pid for p in forks.children() if p.status() != psutil.STATUS_ZOMBIE}
 
 
 def start(tmp: Path, **env: str) -> LiveServer:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import subprocess
 from typing import Any
 
+import psutil
+
 
 def stop_process(proc: subprocess.Popen[Any], grace_s: float = 20.0) -> None:
     """Ask ``proc`` to end (SIGTERM) and wait; kill it if it is still running after ``grace_s`` seconds."""
@@ -14,3 +16,16 @@ def stop_process(proc: subprocess.Popen[Any], grace_s: float = 20.0) -> None:
     except subprocess.TimeoutExpired:
         proc.kill()
         proc.wait()
+
+
+def fork_server(pid: int) -> psutil.Process | None:
+    """The child of process ``pid`` that runs a multiprocessing fork server, or None. A child that has just
+    ended (a build process the server has not reaped yet) is passed over: asking for its command line raises."""
+    for child in psutil.Process(pid).children():
+        try:
+            command = " ".join(child.cmdline())
+        except psutil.NoSuchProcess:  # ZombieProcess too
+            continue
+        if "forkserver" in command:
+            return child
+    return None
