@@ -24,12 +24,12 @@ from engine.build.records import contour_rows, dataset_meta
 from engine.cartography.dataset import UPHILL_SIDE_KEY
 from engine.cartography.options import PARAMS_KEY, CartographyOptions, check_schedule_fits
 from engine.cartography.units import source_units
-from engine.ccsm.build import BuiltSet, SpooledSet, build_into, build_pool, default_workers
+from engine.ccsm.build import BuiltSet, SpooledSet, build_into, build_pool
 from engine.ccsm.ccs import CCS
 from engine.ccsm.spool import surface_of
 from engine.io.dem import DEM_SUFFIXES, source_uphill_side
 from engine.io.source import Source, is_dem, read_source, source_file
-from engine.parallel import local_pool, map_ordered
+from engine.parallel import map_ordered
 from engine.params import BuildParams
 from engine.payloads import opened
 from engine.scratch import DiskSpool, ReadScratch
@@ -307,8 +307,7 @@ def _reading_pool(
     process, None (its build opens its own pool, :func:`~engine.ccsm.build.build_pool`)."""
     if executor is not None or not is_dem(spec.path):
         return nullcontext(executor)
-    count = default_workers() if workers is None else max(1, workers)
-    return nullcontext(None) if count == 1 else local_pool(count)
+    return build_pool(None, workers, None)
 
 
 def build_dataset(

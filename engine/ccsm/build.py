@@ -169,24 +169,26 @@ def _build_kept_chunk(
     )
 
 
-def _pool(executor: Executor | None, workers: int, chunks: int) -> AbstractContextManager[Executor | None]:
-    """Where a build's tasks run: the given executor, a local pool of ``workers``, or this process (None)."""
+def _pool(executor: Executor | None, workers: int, chunks: int | None) -> AbstractContextManager[Executor | None]:
+    """Where a build's tasks run: the given executor, a local pool of ``workers``, or this process (None) when
+    there is one worker or at most one chunk of work (``chunks`` None: not known yet)."""
     if executor is not None:
         return nullcontext(executor)
-    if workers == 1 or chunks <= 1:
+    if workers == 1 or (chunks is not None and chunks <= 1):
         return nullcontext(None)
     return local_pool(workers)
 
 
 def build_pool(
-    executor: Executor | None, workers: int | None, contours: int
+    executor: Executor | None, workers: int | None, contours: int | None
 ) -> AbstractContextManager[Executor | None]:
     """The executor for the whole of a build of ``contours`` contours and its save: the given one, else a local
     pool of ``workers`` processes (None: one per core) when there is more than one chunk of work, else None
     (this process). Opened once by the caller, so that the store rows and label candidates of the save run on
-    the same processes as the build, not serially in the process that writes the store."""
+    the same processes as the build, not serially in the process that writes the store. ``contours`` None: a
+    source not read yet (a DEM, traced on the pool), which gets a pool whenever there are several workers."""
     workers = default_workers() if workers is None else max(1, workers)
-    return _pool(executor, workers, -(-contours // CHUNK))
+    return _pool(executor, workers, None if contours is None else -(-contours // CHUNK))
 
 
 def default_workers() -> int:

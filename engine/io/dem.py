@@ -340,8 +340,7 @@ def _grid_parts(path: Path, grid: DemGrid, interval: float, executor: Executor |
     """
     levels, none_found = _grid_levels(grid, interval, path.name)
     if executor is None:
-        traced = iter_levels(grid.z, levels)
-        return _at_least_one((line_parts_from_traced([lv], grid.transform, path.name) for lv in traced), none_found)
+        return _at_least_one(_level_parts(grid, levels, path.name), none_found)
     stat = path.stat()
     per_task = max(MIN_LEVELS_PER_TASK, math.ceil(len(levels) / LEVEL_TASKS))
     runs = [levels[k : k + per_task].tolist() for k in range(0, len(levels), per_task)]
@@ -367,9 +366,13 @@ def trace_grid_levels(path: str, levels: list[float], expected: tuple[int, int])
         raise SourceError(f"{file.name}: the DEM cannot be read on this worker ({exc.strerror})") from exc
     if (stat.st_size, stat.st_mtime_ns) != tuple(expected):
         raise SourceError(f"{file.name}: the DEM changed while it was being traced")
-    grid = read_dem(file)
-    traced = iter_levels(grid.z, np.asarray(levels, dtype=np.float64))
-    return [line_parts_from_traced([lv], grid.transform, file.name) for lv in traced]
+    return list(_level_parts(read_dem(file), np.asarray(levels, dtype=np.float64), file.name))
+
+
+def _level_parts(grid: DemGrid, levels: NDArray[np.float64], where: str) -> Iterator[LineParts]:
+    """Each of ``levels`` that has a line in ``grid``, traced when it is read and mapped to the grid's CRS."""
+    for level in iter_levels(grid.z, levels):
+        yield line_parts_from_traced([level], grid.transform, where)
 
 
 def line_parts_from_traced(

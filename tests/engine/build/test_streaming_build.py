@@ -188,7 +188,6 @@ def test_a_local_build_makes_its_rows_and_label_candidates_on_its_own_pool(
         return pools[-1]
 
     monkeypatch.setattr(ccsm_build, "local_pool", recording_pool)
-    monkeypatch.setattr(datasets, "local_pool", recording_pool)
     if source == "dem":
         z = fractal_heights(11, 3.0, n=64, relief_m=200.0).astype(np.float32)
         path = write_geotiff(tmp_path / "t.tif", z, west=740_000.0, north=4_060_000.0, cell=30.0, crs="EPSG:32616")
