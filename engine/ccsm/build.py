@@ -25,11 +25,11 @@ from engine.ccsm.blocks import (
     piece_boxes,
     surface_boxes,
 )
-from engine.ccsm.ccs import CCS, check_contour, slice_area
+from engine.ccsm.ccs import CCS, slice_area
 from engine.ccsm.contour_issues import build_or_keep_input, nothing_to_serve
 from engine.ccsm.regression import ScaleModel, fit_scale_model
 from engine.ccsm.spool import MemorySpool, Spool
-from engine.errors import CCSMError
+from engine.ccsm.survey import survey_contours
 from engine.geom.polyline import ring_areas
 from engine.heap import keep_big_buffers_out_of_the_heap, release_free_memory
 from engine.parallel import local_pool, map_ordered
@@ -293,11 +293,26 @@ def build_into(
     params = params or BuildParams()
     keep_big_buffers_out_of_the_heap()
     release_free_memory()  # what reading the source freed
-    usable, rejected = _usable(contour_set.contours)
-    # The usable contours are read from the set when a chunk needs them: a big source's wait on disk.
-    contours = ContourSubset(contour_set.contours, usable)
-    model, labels = fit_scale_model(contours, params)
     workers = default_workers() if workers is None else max(1, workers)
+    # One BLAS thread per worker: OpenBLAS's own threads would fight the worker processes for the cores.
+    # A given executor (a Dask cluster) runs the very same chunks and repair tasks; it is the caller's to shut
+    # down. The local pool stays open through the crossing repair, whose checks and rebuilds it runs too.
+    with _pool(executor, workers, -(-len(contour_set.contours) // CHUNK)) as pool:
+        return _build_on(pool, spool, contour_set, params, progress)
+
+
+def _build_on(
+    pool: Executor | None,
+    spool: Spool,
+    contour_set: ContourSet,
+    params: BuildParams,
+    progress: ProgressCallback | None,
+) -> SpooledSet:
+    """:func:`build_into` on ``pool`` (None: this process)."""
+    survey = survey_contours(contour_set.contours, pool)
+    # The usable contours are read from the set when a chunk needs them: a big source's wait on disk.
+    contours = ContourSubset(contour_set.contours, survey.usable)
+    model, labels = fit_scale_model(contours, params, survey.features)
     starts = range(0, len(contours), CHUNK)
     tasks = (
         (
@@ -316,29 +331,25 @@ def build_into(
     total = len(contours)  # contours that passed the check; the rejected ones are reported, not built
     if progress:
         progress(0, total)
-    # One BLAS thread per worker: OpenBLAS's own threads would fight the worker processes for the cores.
-    # A given executor (a Dask cluster) runs the very same chunks and repair tasks; it is the caller's to shut
-    # down. The local pool stays open through the crossing repair, whose checks and rebuilds it runs too.
-    with _pool(executor, workers, len(starts)) as pool:
-        for start, chunk in zip(starts, map_ordered(pool, _build_kept_chunk, tasks), strict=True):
-            failed.extend(chunk.failed)
-            numbers = range(len(built), len(built) + len(chunk.built))
-            spool.put_payloads(zip(numbers, chunk.payloads, strict=True))
-            pieces.put_boxes(numbers, chunk.pieces)
-            built.extend(start + k for k in chunk.built)
-            boxes.append(chunk.bounds)
-            if progress:
-                progress(min(start + CHUNK, total), total)
-        inputs = ContourSubset(contours, built)  # the input of each surface, by its number
-        repaired = 0
-        if params.resolve_crossings and params.target_mode == "scale" and built:
-            with threadpool_limits(1):
-                release_free_memory()
-                repaired = resolve_crossings(
-                    spool, np.concatenate(boxes), pieces, inputs, labels[built].tolist(), params, model, pool
-                )
+    for start, chunk in zip(starts, map_ordered(pool, _build_kept_chunk, tasks), strict=True):
+        failed.extend(chunk.failed)
+        numbers = range(len(built), len(built) + len(chunk.built))
+        spool.put_payloads(zip(numbers, chunk.payloads, strict=True))
+        pieces.put_boxes(numbers, chunk.pieces)
+        built.extend(start + k for k in chunk.built)
+        boxes.append(chunk.bounds)
+        if progress:
+            progress(min(start + CHUNK, total), total)
+    inputs = ContourSubset(contours, built)  # the input of each surface, by its number
+    repaired = 0
+    if params.resolve_crossings and params.target_mode == "scale" and built:
+        with threadpool_limits(1):
+            release_free_memory()
+            repaired = resolve_crossings(
+                spool, np.concatenate(boxes), pieces, inputs, labels[built].tolist(), params, model, pool
+            )
     if not built and total:
-        raise nothing_to_serve(rejected + failed, total)
+        raise nothing_to_serve(survey.rejected + failed, total)
     return SpooledSet(
         spool=spool,
         inputs=inputs,
@@ -347,26 +358,11 @@ def build_into(
         params=params,
         working_crs=contour_set.working_crs,
         source_crs=contour_set.source_crs,
-        bad_features=list(contour_set.bad_features) + rejected + failed,
+        bad_features=list(contour_set.bad_features) + survey.rejected + failed,
         name=contour_set.name,
         interval=contour_set.interval,
         repaired=repaired,
     )
-
-
-def _usable(contours: Sequence[Contour]) -> tuple[list[int], list[BadFeature]]:
-    """The positions of the contours a CCS can be built from, and the others with the reason. Checked before
-    anything is built: one unusable contour must not break the grouping of the others."""
-    usable: list[int] = []
-    rejected: list[BadFeature] = []
-    for k, contour in enumerate(contours):
-        try:
-            check_contour(contour)
-        except CCSMError as exc:
-            rejected.append(BadFeature(contour.id, str(exc)))
-        else:
-            usable.append(k)
-    return usable, rejected
 
 
 #: Contours per rebuild task of the crossing repair: a round rebuilds a few hundred at most.

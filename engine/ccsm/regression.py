@@ -127,13 +127,18 @@ def t_for_scale(ladder: NDArray[np.float64], t_at_scale: NDArray[np.float64], sc
     return float(np.interp(np.log(scale), np.log(ladder), t_at_scale, left=0.0, right=1.0))
 
 
+def contour_features(contour: Contour) -> tuple[float, float]:
+    """Size and shape of a contour: log10 length, and sinuosity (length / extent diagonal)."""
+    length = path_length(contour.coords, contour.closed)
+    diag = float(np.hypot(*np.ptp(contour.coords, axis=0)))
+    return float(np.log10(max(length, 1e-9))), length / max(diag, 1e-9)
+
+
 def group_features(contours: Sequence[Contour]) -> NDArray[np.float64]:
-    """(n, 2) size and shape of each contour: log10 length, and sinuosity (length / extent diagonal)."""
+    """(n, 2) :func:`contour_features` of each contour."""
     feats = np.empty((len(contours), 2))
     for i, c in enumerate(contours):
-        length = path_length(c.coords, c.closed)
-        diag = float(np.hypot(*np.ptp(c.coords, axis=0)))
-        feats[i] = (np.log10(max(length, 1e-9)), length / max(diag, 1e-9))
+        feats[i] = contour_features(c)
     return feats
 
 
@@ -230,8 +235,11 @@ def fit_group_model(references: list[Contour], params: BuildParams) -> GroupMode
     return GroupModel(coefficients=coefficients, reference_id=references[0].id, scales=scales, similarities=y)  # type: ignore[arg-type]
 
 
-def fit_scale_model(contours: Sequence[Contour], params: BuildParams) -> tuple[ScaleModel, NDArray[np.intp]]:
-    """Group the contours and fit one regression per group.
+def fit_scale_model(
+    contours: Sequence[Contour], params: BuildParams, features: NDArray[np.float64] | None = None
+) -> tuple[ScaleModel, NDArray[np.intp]]:
+    """Group the contours (by ``features``, their :func:`group_features` when already known) and fit one
+    regression per group.
 
     Returns
     -------
@@ -244,7 +252,7 @@ def fit_scale_model(contours: Sequence[Contour], params: BuildParams) -> tuple[S
             len(contours), np.intp
         )
     # Once for both steps: it reads every contour, from the scratch file on a big build.
-    feats = group_features(contours)
+    feats = group_features(contours) if features is None else features
     labels, references = assign_groups(contours, params.groups, feats=feats)
     groups = []
     for members in reference_sets(contours, labels, references, REFERENCES_PER_GROUP, feats):
