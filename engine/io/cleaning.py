@@ -75,8 +75,24 @@ class _Checked:
     bounds: tuple[float, float, float, float] | None
 
 
+@dataclass
+class CheckedBatch:
+    """A batch of line parts checked in their CRS (:func:`check_batch`): what a worker that traced the parts hands
+    over, so that the build process does not check them again. ``bad`` are the batch's own rejected features."""
+
+    parts: LineParts
+    check: _Checked
+    bad: list[BadFeature]
+
+
+def check_batch(batch: LineParts, source_crs: pyproj.CRS) -> CheckedBatch:
+    """The first pass of :func:`assemble_batches` over one batch: its parts checked in ``source_crs``."""
+    parts = LineParts(batch.xy, batch.offsets, batch.ids, batch.elevations)  # its bad ones are listed apart
+    return CheckedBatch(parts, _check_in_source_crs(parts, source_crs), list(batch.bad))
+
+
 def assemble_batches(
-    batches: Iterable[LineParts],
+    batches: Iterable[LineParts | CheckedBatch],
     *,
     source_crs: pyproj.CRS,
     where: str,
@@ -105,7 +121,7 @@ def assemble_batches(
     Parameters
     ----------
     batches
-        Line parts in ``source_crs``.
+        Line parts in ``source_crs``, or already checked in it (:func:`check_batch`, run where they were made).
     source_crs
         Their CRS.
     where
@@ -128,15 +144,14 @@ def assemble_batches(
     checked: list[tuple[LineParts, _Checked]] = []
     usable = []
     for batch in batches:
-        check = _check_in_source_crs(batch, source_crs)
-        bad.extend(batch.bad)
-        batch = LineParts(batch.xy, batch.offsets, batch.ids, batch.elevations)  # its bad ones are listed
+        done = batch if isinstance(batch, CheckedBatch) else check_batch(batch, source_crs)
+        bad.extend(done.bad)
         if scratch is not None:
-            scratch.extend(CHECKED_LIST, [(batch, check)])
+            scratch.extend(CHECKED_LIST, [(done.parts, done.check)])
         else:
-            checked.append((batch, check))
-        if check.bounds is not None:
-            usable.append(check.bounds)
+            checked.append((done.parts, done.check))
+        if done.check.bounds is not None:
+            usable.append(done.check.bounds)
     # Read back one batch at a time: a batch is up to ASSEMBLE_BATCH_VERTICES vertices.
     waiting: Iterable[tuple[LineParts, _Checked]] = (
         scratch.read(CHECKED_LIST, batch=1) if scratch is not None else checked

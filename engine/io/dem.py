@@ -19,7 +19,7 @@ from rasterio.errors import RasterioError
 
 from engine.errors import InvalidParameter, SourceError
 from engine.intervals import UNIT_NAMES
-from engine.io.cleaning import LineParts, assemble_batches, in_batches
+from engine.io.cleaning import CheckedBatch, LineParts, assemble_batches, check_batch, in_batches
 from engine.io.crs import WGS84, parse_crs
 from engine.io.dem_tracing import LevelLines, contour_levels, iter_levels, uphill_side
 from engine.io.dem_windows import (
@@ -147,6 +147,7 @@ def contours_from_dem(
         )
     path = Path(path)
     windowed = _windowed_block(path, block)
+    batches: Iterator[LineParts | CheckedBatch]
     if windowed is not None:
         levels, header = contour_windows(path, float(interval), block=windowed, executor=executor, scratch=scratch)
         transform, crs = header.transform, parse_crs(header.crs_wkt, where=str(path))
@@ -155,9 +156,8 @@ def contours_from_dem(
     else:
         grid = read_dem(path)
         crs = grid.crs
-        parts = _grid_parts(path, grid, float(interval), executor)
+        batches = _grid_batches(path, grid, float(interval), executor)
         del grid  # with workers, each reads its own copy: this one is not kept while they trace
-        batches = (batch for level_parts in parts for batch in in_batches(level_parts))
     return assemble_batches(
         batches,
         source_crs=crs,
@@ -330,9 +330,12 @@ LEVEL_TASKS = 8
 MIN_LEVELS_PER_TASK = 8
 
 
-def _grid_parts(path: Path, grid: DemGrid, interval: float, executor: Executor | None) -> Iterator[LineParts]:
-    """The lines of a grid read whole, level by level (levels without a line left out) in the grid's CRS: traced
-    here without an executor, else on its workers, a run of levels per task (:func:`trace_grid_levels`).
+def _grid_batches(
+    path: Path, grid: DemGrid, interval: float, executor: Executor | None
+) -> Iterator[LineParts | CheckedBatch]:
+    """The lines of a grid read whole in batches, level by level (levels without a line left out), in the grid's
+    CRS: traced here without an executor, else on its workers, a run of levels per task, each batch checked
+    there too (:func:`trace_grid_levels`).
 
     Each worker reads the file again rather than receive the heights: a task then weighs a few bytes, and the
     lines are the very ones this process would trace, since a level's lines depend only on the heights and the
@@ -340,19 +343,22 @@ def _grid_parts(path: Path, grid: DemGrid, interval: float, executor: Executor |
     """
     levels, none_found = _grid_levels(grid, interval, path.name)
     if executor is None:
-        return _at_least_one(_level_parts(grid, levels, path.name), none_found)
+        parts = _at_least_one(_level_parts(grid, levels, path.name), none_found)
+        return (batch for level_parts in parts for batch in in_batches(level_parts))
     stat = path.stat()
     per_task = max(MIN_LEVELS_PER_TASK, math.ceil(len(levels) / LEVEL_TASKS))
     runs = [levels[k : k + per_task].tolist() for k in range(0, len(levels), per_task)]
     # The absolute path: a Dask worker runs in a directory of its own.
     tasks = ((str(path.resolve()), run, (stat.st_size, stat.st_mtime_ns)) for run in runs)
     traced_runs = map_ordered(executor, trace_grid_levels, tasks)
-    return _at_least_one((parts for run in traced_runs for parts in run), none_found)
+    # Every level with a line makes at least one batch (its lines, or the artefacts it reports).
+    return _at_least_one((batch for run in traced_runs for batch in run), none_found)
 
 
-def trace_grid_levels(path: str, levels: list[float], expected: tuple[int, int]) -> list[LineParts]:
-    """The lines of ``levels`` in the DEM at ``path`` read whole, one :class:`LineParts` per level that has a
-    line, in the grid's CRS: what :func:`contours_from_dem` traces in this process, run on a worker.
+def trace_grid_levels(path: str, levels: list[float], expected: tuple[int, int]) -> list[CheckedBatch]:
+    """The lines of ``levels`` in the DEM at ``path`` read whole, in the grid's CRS, in batches checked in it
+    (:func:`~engine.io.cleaning.check_batch`): what :func:`contours_from_dem` traces and checks in this process,
+    run on a worker.
 
     Raises
     ------
@@ -366,7 +372,9 @@ def trace_grid_levels(path: str, levels: list[float], expected: tuple[int, int])
         raise SourceError(f"{file.name}: the DEM cannot be read on this worker ({exc.strerror})") from exc
     if (stat.st_size, stat.st_mtime_ns) != tuple(expected):
         raise SourceError(f"{file.name}: the DEM changed while it was being traced")
-    return list(_level_parts(read_dem(file), np.asarray(levels, dtype=np.float64), file.name))
+    grid = read_dem(file)
+    level_parts = _level_parts(grid, np.asarray(levels, dtype=np.float64), file.name)
+    return [check_batch(batch, grid.crs) for parts in level_parts for batch in in_batches(parts)]
 
 
 def _level_parts(grid: DemGrid, levels: NDArray[np.float64], where: str) -> Iterator[LineParts]:

@@ -1,6 +1,6 @@
-"""A DEM read whole is traced on the build's workers, a run of levels per task (issue 26 item 2): the lines, their
-ids and order, and the features left out are exactly those of tracing it in the build process, on any terrain,
-and the build process itself traces no level."""
+"""A DEM read whole is traced on the build's workers, a run of levels per task, and its lines checked in its CRS
+there (issue 26 item 2): the lines, their ids and order, and the features left out are exactly those of tracing
+and checking it in the build process, on any terrain, and the build process itself traces and checks no level."""
 
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from terrain_strategies import KINDS, PLACES, TERRAIN_SETTINGS, TerrainCase
 
+import engine.io.cleaning as cleaning
 import engine.io.dem as dem
 from engine.errors import SourceError
 from engine.io.dem import contours_from_dem, trace_grid_levels
@@ -79,17 +80,21 @@ def write_terrain(folder: Path) -> tuple[Path, float]:
     return case.write(folder), case.interval
 
 
-def test_the_build_process_traces_no_level_when_it_has_workers(
+def test_the_build_process_neither_traces_nor_checks_a_level_when_it_has_workers(
     tmp_path: Path, pool: Executor, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     path, interval = write_terrain(tmp_path)
     here = traced(path, interval, None)
     assert isinstance(here, ContourSet) and len(here.contours) > 20
 
-    def refuse(*args: object) -> None:
+    def refuse_tracing(*args: object) -> None:
         raise AssertionError("a level was traced in the build process")
 
-    monkeypatch.setattr(dem, "iter_levels", refuse)
+    def refuse_checking(*args: object) -> None:
+        raise AssertionError("lines were checked in their CRS in the build process")
+
+    monkeypatch.setattr(dem, "iter_levels", refuse_tracing)
+    monkeypatch.setattr(cleaning, "_check_in_source_crs", refuse_checking)
     assert_identical(traced(path, interval, pool), here)
 
 
