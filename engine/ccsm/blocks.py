@@ -19,8 +19,8 @@ import math
 from collections import OrderedDict
 from collections.abc import Iterable, Iterator, Sequence
 from concurrent.futures import Executor
-from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -318,13 +318,14 @@ def _runs(pieces: NDArray[np.intp], owner: NDArray[np.integer]) -> tuple[NDArray
 
 
 def block_contacts(
-    near: Sequence[CCS | bytes], own: Sequence[int], ladder: NDArray[np.float64], steps: Sequence[int]
+    near: Sequence[CCS | bytes | NearStretch], own: Sequence[int], ladder: NDArray[np.float64], steps: Sequence[int]
 ) -> set[tuple[int, int]]:
     """Pairs (i, j), i < j, of local indices (into ``near``) whose slices meet at some checked step, each with
     an ``own`` surface in it. The surfaces come as :func:`_block_tasks` sends them: the block's own as the
     spool keeps them (opened here, in the worker, :func:`~engine.ccsm.spool.surface_of`), the others cut to
     their near stretches."""
-    pairs = new_contact_pairs([surface_of(p) for p in near], ladder, steps, set(own))
+    surfaces = [p if isinstance(p, NearStretch) else surface_of(p) for p in near]
+    pairs = new_contact_pairs(surfaces, ladder, steps, set(own))
     release_free_memory()  # a worker's next block starts from what this one freed
     return pairs
 
@@ -361,7 +362,7 @@ def _block_tasks(
     surfaces are read through ``cache`` (None: a new one)."""
     cache = cache if cache is not None else NearCache(spool)
     for b in blocks:
-        near: list[CCS | bytes] = []
+        near: list[CCS | bytes | NearStretch] = []
         # A few surfaces read at a time: whole, the long contours passing by a block can weigh far more than
         # their stretches, and the block's task holds only those.
         for k in range(0, len(b.near), NEAR_READ_BATCH):
@@ -451,9 +452,22 @@ def _task_bytes(task: tuple[Any, ...]) -> int:
     return sum(len(p) if isinstance(p, bytes) else p.base.nbytes + p.top.nbytes for p in task[0])
 
 
-def _stretch(surface: CCS, first: int, last: int) -> CCS:
+class NearStretch(NamedTuple):
+    """Rows ``first`` .. ``last`` of a surface passing near a block, with what the contact check reads besides
+    (``topology.SurfaceRows``): all a block's task carries of a contour it only checks its own against. A whole
+    CCS cut with ``dataclasses.replace`` had cost the build process 20 µs a stretch (every field checked
+    again), and its similarity tables went into every task."""
+
+    base: Coords
+    top: Coords
+    t_at_scale: NDArray[np.float64]
+    vanish_scale: float
+
+
+def _stretch(surface: CCS, first: int, last: int) -> NearStretch:
     """Rows ``first`` .. ``last`` of a surface (its slices there), as the blocks' check takes them."""
-    return replace(surface, base=surface.base[first : last + 1].copy(), top=surface.top[first : last + 1].copy())
+    rows = slice(first, last + 1)
+    return NearStretch(surface.base[rows].copy(), surface.top[rows].copy(), surface.t_at_scale, surface.vanish_scale)
 
 
 def find_crossings_by_block(

@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Container, Iterable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import shapely
@@ -21,6 +21,28 @@ from engine.types import Coords
 
 if TYPE_CHECKING:
     from engine.ccsm.ccs import CCS
+
+
+class SurfaceRows(Protocol):
+    """What the contact check reads of a surface: its rows, its t at each ladder scale and the scale it vanishes
+    at. A CCS is one; so is a stretch of its rows (``blocks.NearStretch``)."""
+
+    @property
+    def base(self) -> Coords:
+        """(M, 2) rows at t = 0."""
+
+    @property
+    def top(self) -> Coords:
+        """(M, 2) rows at t = 1."""
+
+    @property
+    def t_at_scale(self) -> NDArray[np.float64]:
+        """(S,) t at each scale of the ladder."""
+
+    @property
+    def vanish_scale(self) -> float:
+        """Scale denominator from which it is not shown (inf: never)."""
+
 
 #: Threads for the crossing checks: the compiled pass releases the GIL, so two share the pairs of pieces.
 CHECK_THREADS = 2
@@ -368,7 +390,7 @@ LEARN_BATCH = 256
 
 
 def new_contact_pairs(
-    surfaces: Sequence[CCS],
+    surfaces: Sequence[SurfaceRows],
     ladder: NDArray[np.float64],
     steps: Sequence[int],
     only: set[int] | None = None,
@@ -384,7 +406,7 @@ def new_contact_pairs(
     Parameters
     ----------
     surfaces
-        CCS, each with its ``t_at_scale`` table on ``ladder``.
+        CCS (or stretches of their rows), each with its ``t_at_scale`` table on ``ladder``.
     ladder, steps
         The scale ladder and the indices k of the steps (ladder[k], ladder[k + 1]) to check.
     only

@@ -150,11 +150,18 @@ def test_repair_by_small_blocks_makes_the_surfaces_of_the_repair_over_the_whole_
 
 
 def test_a_block_task_carries_whole_surfaces_as_stored_and_stretches_cut(tmp_path) -> None:
-    from engine.ccsm.blocks import _block_tasks
+    from dataclasses import replace
+
+    from engine.ccsm.blocks import NearStretch, _block_tasks
     from engine.ccsm.spool import surface_of
     from engine.scratch import DiskSpool
 
-    surfaces = random_lines()
+    # Each surface its own t table and vanishing scale: a stretch must carry its own surface's, which the
+    # contact check reads with its rows.
+    surfaces = [
+        replace(s, t_at_scale=np.linspace(0.0, 1.0, 5) ** (1 + i % 7), vanish_scale=1e5 + i)
+        for i, s in enumerate(random_lines())
+    ]
     spool = DiskSpool(tmp_path)
     spool.put_many(enumerate(surfaces))
     pieces = PieceIndex()
@@ -170,8 +177,11 @@ def test_a_block_task_carries_whole_surfaces_as_stored_and_stretches_cut(tmp_pat
                 assert isinstance(near[k], bytes)  # shipped as stored, opened in the worker
                 np.testing.assert_array_equal(s.base, whole.base)
             else:
+                assert isinstance(near[k], NearStretch)  # its rows and what the check reads, not a whole CCS
                 np.testing.assert_array_equal(s.base, whole.base[f : la + 1])
                 np.testing.assert_array_equal(s.top, whole.top[f : la + 1])
+                np.testing.assert_array_equal(s.t_at_scale, whole.t_at_scale)
+                assert s.vanish_scale == whole.vanish_scale
                 cut += len(s.base) < len(whole.base)
     spool.close()
     assert cut > 0
