@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import pickle
+import sys
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
@@ -16,7 +17,7 @@ from contextlib import contextmanager
 from functools import partial
 from typing import Any, ParamSpec, TypeVar
 
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController, threadpool_limits
 
 from engine.errors import InvalidParameter
 from engine.heap import keep_big_buffers_out_of_the_heap
@@ -32,8 +33,22 @@ def run_single_threaded(fn: Callable[..., R], *args: Any, **kwargs: Any) -> R:
     """Call ``fn`` with one BLAS thread: a worker's small banded solves only spin on more, and fight the
     other workers for the cores."""
     keep_big_buffers_out_of_the_heap()  # once per process
-    with threadpool_limits(1):
+    with thread_pools().limit(limits=1):
         return fn(*args, **kwargs)
+
+
+#: This process's thread pools and the number of modules imported when they were found (see :func:`thread_pools`).
+_pools: tuple[int, ThreadpoolController] | None = None
+
+
+def thread_pools() -> ThreadpoolController:
+    """The BLAS and OpenMP thread pools this process has loaded, found again only when a module has been imported
+    since (a new one may bring a library). Finding them walks every loaded library: once per task, as
+    ``threadpool_limits`` does, it was 3 % of a Dask worker's time on the 16x terrain."""
+    global _pools
+    if _pools is None or _pools[0] != len(sys.modules):
+        _pools = (len(sys.modules), ThreadpoolController())
+    return _pools[1]
 
 
 class SingleThreadedExecutor(Executor):
