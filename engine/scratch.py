@@ -1,12 +1,13 @@
-"""Scratch files of a build in progress: SQLite files beside the store that hold what the build has read or
-made until it is written, so a build's memory does not grow with the dataset (docs/design.md section 6).
+"""Scratch files of a build in progress: files beside the store that hold what the build has read or made
+until it is written, so a build's memory does not grow with the dataset (docs/design.md section 6).
 
-This is the one home of the mechanism. A scratch file holds **named lists of pickled objects** by position
-(:class:`ReadScratch`); a reader appends to its lists and reads them back in order (a DEM's traced levels, a
-vector source's checked batches, the usable contours as :class:`ScratchContours`), and a build keeps its
-surfaces in one list by their number (:class:`DiskSpool`, the on-disk form of ``engine.ccsm.spool.Spool``).
+This is the one home of the mechanism. A SQLite scratch file holds **named lists of pickled objects** by
+position (:class:`ReadScratch`); a reader appends to its lists and reads them back in order (a DEM's traced
+levels, a vector source's checked batches, the usable contours as :class:`ScratchContours`). A build keeps its
+surfaces by number in a file of their pickles, appended and read back where they lie (:class:`DiskSpool`, the
+on-disk form of ``engine.ccsm.spool.Spool``): the crossing repair reads each surface a few times, at random.
 What stays elsewhere is not a second copy: ``engine.ccsm.spool`` holds only the method's protocol and its
-in-memory form (the method may not touch SQLite), and opens what :meth:`DiskSpool.get_payloads` sends.
+in-memory form (the method may not touch files), and opens what :meth:`DiskSpool.get_payloads` sends.
 
 A scratch file is not the store: no server reads it, it is written without a journal or fsync (a killed build
 only leaves it to be removed) and it is deleted when the build ends. Its name carries the host and process
@@ -19,6 +20,7 @@ import os
 import pickle
 import sqlite3
 import tempfile
+from array import array
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, overload
@@ -49,15 +51,37 @@ def pid_alive(pid: int) -> bool:
     return True
 
 
+#: Endings of scratch files: a SQLite file of lists (:class:`ReadScratch`), a file of surfaces (:class:`DiskSpool`).
+SCRATCH_SUFFIXES = (".sqlite", ".spool")
+
+
 def remove_stale_scratch(directory: str | os.PathLike[str]) -> list[Path]:
     """Remove the scratch files of this host's builds that no longer run; the paths removed."""
     removed = []
-    for path in Path(directory).glob(f"{SCRATCH_PREFIX}{host_name()}-*.sqlite"):
+    for path in sorted(Path(directory).glob(f"{SCRATCH_PREFIX}{host_name()}-*")):
         pid = path.name[len(SCRATCH_PREFIX) + len(host_name()) + 1 :].split("-", 1)[0]
-        if pid.isdigit() and not pid_alive(int(pid)):
+        if path.suffix in SCRATCH_SUFFIXES and pid.isdigit() and not pid_alive(int(pid)):
             path.unlink(missing_ok=True)
             removed.append(path)
     return removed
+
+
+def new_scratch_file(directory: str | os.PathLike[str], suffix: str) -> tuple[int, Path]:
+    """A new empty scratch file in ``directory`` (stale ones removed first), open for reading and writing: its
+    descriptor and path.
+
+    Raises
+    ------
+    StoreError
+        The file cannot be made there (a missing or read-only directory, a full disk).
+    """
+    remove_stale_scratch(directory)
+    prefix = f"{SCRATCH_PREFIX}{host_name()}-{os.getpid()}-"
+    try:
+        fd, name = tempfile.mkstemp(prefix=prefix, suffix=suffix, dir=directory)
+    except OSError as exc:
+        raise StoreError(f"cannot make the build's scratch file in {directory}: {exc.strerror}") from exc
+    return fd, Path(name)
 
 
 def open_scratch(directory: str | os.PathLike[str], schema: str) -> tuple[Path, sqlite3.Connection]:
@@ -68,12 +92,7 @@ def open_scratch(directory: str | os.PathLike[str], schema: str) -> tuple[Path, 
     StoreError
         The file cannot be made there (a missing or read-only directory, a full disk).
     """
-    remove_stale_scratch(directory)
-    prefix = f"{SCRATCH_PREFIX}{host_name()}-{os.getpid()}-"
-    try:
-        fd, name = tempfile.mkstemp(prefix=prefix, suffix=".sqlite", dir=directory)
-    except OSError as exc:
-        raise StoreError(f"cannot make the build's scratch file in {directory}: {exc.strerror}") from exc
+    fd, name = new_scratch_file(directory, ".sqlite")
     os.close(fd)
     con = sqlite3.connect(name)
     # Scratch data: no journal, no fsync. A crash loses only this file, which nothing else reads.
@@ -224,9 +243,17 @@ class ScratchContours(Sequence[Contour]):
         return self.scratch.payloads(self.name, wanted)
 
 
+#: Surfaces written by one ``pwritev`` call (Linux takes at most 1,024 buffers a call).
+WRITE_BUFFERS = 512
+
+
 class DiskSpool:
-    """A build's surfaces by number, in a scratch file in ``directory`` (the store's, so on the same disk):
-    the ``engine.ccsm.spool.Spool`` protocol on one list of a :class:`ReadScratch`.
+    """A build's surfaces by number, in a scratch file in ``directory`` (the store's, so on the same disk): the
+    ``engine.ccsm.spool.Spool`` protocol. Each surface's pickle is appended to the file and where it lies
+    (offset, length) is kept in memory, 16 bytes a surface; a surface put again is appended anew (the repair
+    rebuilds a few per cent of the surfaces, whose old bytes stay unread until the file goes). Read back one
+    ``pread`` a surface: the repair reads each surface a few times, and a blob read from SQLite had cost three
+    times as much (its pages walked and copied).
 
     >>> import tempfile
     >>> with tempfile.TemporaryDirectory() as d:
@@ -239,34 +266,65 @@ class DiskSpool:
     False
     """
 
-    #: The scratch list of the surfaces.
-    LIST = "surfaces"
-
     def __init__(self, directory: str | os.PathLike[str]) -> None:
-        self._scratch = ReadScratch(directory)
-        self.path = self._scratch.path
+        self._fd, self.path = new_scratch_file(directory, ".spool")
+        self._end = 0  # bytes written
+        # Where each number's pickle lies; length -1: nothing kept under that number.
+        self._offset = array("q")
+        self._length = array("q")
 
     def put(self, index: int, surface: Any) -> None:  # noqa: D102
         self.put_many([(index, surface)])
 
     def put_many(self, items: Iterable[tuple[int, Any]]) -> None:
-        """Keep several surfaces in one statement."""
-        self._scratch.put_many(self.LIST, items)
+        """Keep several surfaces in one write."""
+        self.put_payloads((i, pickled(s)) for i, s in items)
 
     #: Surfaces are kept as pickles: a worker sends them back pickled (``engine.payloads.pickled``).
     keeps_pickles = True
 
     def put_payloads(self, items: Iterable[tuple[int, Any]]) -> None:
-        """Keep several surfaces a worker has pickled (bytes), as they are."""
-        self._scratch.put_payloads(self.LIST, items)
+        """Keep several surfaces a worker has pickled (bytes), as they are, in one write."""
+        pairs = [(int(i), blob) for i, blob in items]
+        at = self._end
+        for k in range(0, len(pairs), WRITE_BUFFERS):  # pwritev takes at most IOV_MAX buffers
+            blobs = [blob for _, blob in pairs[k : k + WRITE_BUFFERS]]
+            size = sum(len(b) for b in blobs)
+            try:
+                written = os.pwritev(self._fd, blobs, at)
+            except OSError as exc:  # a full disk, mostly
+                raise StoreError(f"the build's scratch file {self.path.name}: {exc.strerror}") from exc
+            if written != size:
+                raise StoreError(f"the build's scratch file {self.path.name}: {written} of {size} bytes written")
+            at += size
+        top = max((i for i, _ in pairs), default=-1) + 1
+        if top > len(self._length):
+            self._offset.extend([0] * (top - len(self._offset)))
+            self._length.extend([-1] * (top - len(self._length)))
+        for i, blob in pairs:
+            self._offset[i], self._length[i] = self._end, len(blob)
+            self._end += len(blob)
 
     def get(self, indices: Sequence[int]) -> list[Any]:  # noqa: D102
         return [pickle.loads(blob) for blob in self.get_payloads(indices)]
 
     def get_payloads(self, indices: Sequence[int]) -> list[bytes]:
         """The surfaces numbered ``indices`` as stored (pickles): sent to a worker as they are, so this process
-        neither unpickles nor pickles them again (``engine.ccsm.spool.surface_of`` opens them there)."""
-        return self._scratch.payloads(self.LIST, indices)
+        neither unpickles nor pickles them again (``engine.ccsm.spool.surface_of`` opens them there).
 
-    def close(self) -> None:  # noqa: D102
-        self._scratch.close()
+        Raises
+        ------
+        KeyError
+            A number holds nothing.
+        """
+        wanted = [int(i) for i in indices]
+        kept = len(self._length)
+        missing = [i for i in wanted if not 0 <= i < kept or self._length[i] < 0]
+        if missing:
+            raise KeyError(f"not in the spool: {missing[:5]}")
+        return [os.pread(self._fd, self._length[i], self._offset[i]) for i in wanted]
+
+    def close(self) -> None:
+        """Delete the file."""
+        os.close(self._fd)
+        self.path.unlink(missing_ok=True)
