@@ -3,7 +3,7 @@ and the size and shape the scale model groups the usable ones by.
 
 It runs in chunks on the build's workers: the build process only forwards each contour as the pickle the reader
 keeps it as, and gets back a few numbers a contour. Checking and measuring 42,645 contours there had cost 4.2 s
-of its CPU on the 16x terrain, a sixth of all it did (docs/design.md section 10).
+of its CPU on the 16x terrain, an eighth of all it did under the profiler (docs/design.md section 10).
 """
 
 from __future__ import annotations
