@@ -101,8 +101,8 @@ def open_scratch(directory: str | os.PathLike[str], schema: str) -> tuple[Path, 
 
 
 class ReadScratch:
-    """A scratch file in ``directory`` of named lists of objects (pickled) by position: appended to and read
-    back in order, or put and got at given positions.
+    """A scratch file in ``directory`` of named lists of objects (pickled) by position: appended to, and read
+    back in order or at given positions.
 
     Raises
     ------
@@ -138,16 +138,6 @@ class ReadScratch:
         rows = [(name, start + k, pickled(o)) for k, o in enumerate(objects)]
         self._insert(rows)
         self._counts[name] = start + len(rows)
-
-    def put_many(self, name: str, items: Iterable[tuple[int, Any]]) -> None:
-        """Keep objects at given positions of list ``name``, replacing what was there."""
-        self.put_payloads(name, ((i, pickled(o)) for i, o in items))
-
-    def put_payloads(self, name: str, items: Iterable[tuple[int, bytes]]) -> None:
-        """Keep objects already pickled (``engine.payloads.pickled``) at given positions of list ``name``."""
-        rows = [(name, int(i), blob) for i, blob in items]
-        self._insert(rows)
-        self._counts[name] = max([self._counts.get(name, 0), *(i + 1 for _, i, _ in rows)])
 
     def count(self, name: str) -> int:
         """One past the last position of list ``name`` (its length when filled in order)."""

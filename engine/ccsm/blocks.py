@@ -27,9 +27,17 @@ from numpy.typing import NDArray
 
 from engine.ccsm.near import boxes_meeting
 from engine.ccsm.spool import Spool, surface_of
-from engine.ccsm.topology import InputTouches, concatenated_ranges, new_contact_pairs, per_piece, piece_ranges
+from engine.ccsm.topology import (
+    InputTouches,
+    SurfaceRows,
+    concatenated_ranges,
+    new_contact_pairs,
+    per_piece,
+    piece_ranges,
+)
 from engine.heap import release_free_memory
 from engine.parallel import map_ordered
+from engine.payloads import opened
 from engine.types import Coords
 
 if TYPE_CHECKING:
@@ -318,14 +326,13 @@ def _runs(pieces: NDArray[np.intp], owner: NDArray[np.integer]) -> tuple[NDArray
 
 
 def block_contacts(
-    near: Sequence[CCS | bytes | NearStretch], own: Sequence[int], ladder: NDArray[np.float64], steps: Sequence[int]
+    near: Sequence[SurfaceRows | bytes], own: Sequence[int], ladder: NDArray[np.float64], steps: Sequence[int]
 ) -> set[tuple[int, int]]:
     """Pairs (i, j), i < j, of local indices (into ``near``) whose slices meet at some checked step, each with
     an ``own`` surface in it. The surfaces come as :func:`_block_tasks` sends them: the block's own as the
-    spool keeps them (opened here, in the worker, :func:`~engine.ccsm.spool.surface_of`), the others cut to
-    their near stretches."""
-    surfaces = [p if isinstance(p, NearStretch) else surface_of(p) for p in near]
-    pairs = new_contact_pairs(surfaces, ladder, steps, set(own))
+    spool keeps them (opened here, in the worker, :func:`~engine.payloads.opened`), the others cut to their
+    near stretches."""
+    pairs = new_contact_pairs([opened(p) for p in near], ladder, steps, set(own))
     release_free_memory()  # a worker's next block starts from what this one freed
     return pairs
 
@@ -420,10 +427,10 @@ class NearCache:
         """Surface ``number`` opened (it must have been asked for by :meth:`payloads` just before)."""
         entry = self.items[number]
         if entry[1] is None:
-            opened = surface_of(entry[0])
-            entry[1] = opened
-            if opened is not entry[0]:
-                self.size += _payload_bytes(opened)
+            loaded = surface_of(entry[0])
+            entry[1] = loaded
+            if loaded is not entry[0]:
+                self.size += _payload_bytes(loaded)
         surface: CCS = entry[1]
         return surface
 
