@@ -25,7 +25,7 @@ import httpx
 import numpy as np
 import psutil
 import pytest
-from support.processes import fork_server
+from support.processes import forked_processes
 
 from app.main import create_app
 from app.render.jobs import HEAVY_NICENESS
@@ -162,10 +162,7 @@ def test_issue_10_wm_on_a_giant_line_is_refused_naming_the_limit(strict):
 
 def render_workers(server: LiveServer) -> set[int]:
     """Pids of the server's render workers: the children of its fork server."""
-    forks = fork_server(server.proc.pid)
-    if forks is None:
-        return set()
-    return {w.pid for w in forks.children() if w.status() != psutil.STATUS_ZOMBIE}
+    return {w.pid for w in forked_processes(server.proc.pid)}
 
 
 def heavy_worker(server: LiveServer) -> psutil.Process:

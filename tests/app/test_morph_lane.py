@@ -22,7 +22,7 @@ from pathlib import Path
 import httpx
 import psutil
 import pytest
-from support.processes import fork_server
+from support.processes import forked_processes
 
 from engine.store.store import CCSStore
 from tests.app.conftest import LAT0, LON0, LiveServer
@@ -58,10 +58,7 @@ def server(built_store: Path, synthetic_path: Path, tmp_path_factory: pytest.Tem
 
 def render_workers(server: LiveServer) -> list[psutil.Process]:
     """The server's render workers: the children of its fork server."""
-    forks = fork_server(server.proc.pid)
-    if forks is None:
-        return []
-    return [w for w in forks.children() if w.status() != psutil.STATUS_ZOMBIE]
+    return forked_processes(server.proc.pid)
 
 
 def cpu_seconds(workers: list[psutil.Process]) -> dict[int, float]:

@@ -16,7 +16,7 @@ from pathlib import Path
 import httpx
 import psutil
 import pytest
-from support.processes import fork_server
+from support.processes import forked_processes
 
 from app.settings import Settings
 from bench.bench_upload_memory import long_line
@@ -50,10 +50,7 @@ def peak_rss_mb(pid: int) -> float:
 
 def forked_children(server: LiveServer) -> set[int]:
     """Live processes forked from the server's fork server (render workers and upload checks)."""
-    forks = fork_server(server.proc.pid)
-    if forks is None:
-        return set()
-    return {p.pid for p in forks.children() if p.status() != psutil.STATUS_ZOMBIE}
+    return {p.pid for p in forked_processes(server.proc.pid)}
 
 
 def start(tmp: Path, **env: str) -> LiveServer:

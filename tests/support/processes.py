@@ -29,3 +29,12 @@ def fork_server(pid: int) -> psutil.Process | None:
         if "forkserver" in command:
             return child
     return None
+
+
+def forked_processes(pid: int) -> list[psutil.Process]:
+    """The live processes forked from the fork server of process ``pid`` (none without one): a server's render
+    workers and upload checks."""
+    forks = fork_server(pid)
+    if forks is None:
+        return []
+    return [p for p in forks.children() if p.status() != psutil.STATUS_ZOMBIE]
