@@ -35,7 +35,7 @@ from engine.payloads import opened
 from engine.scratch import DiskSpool, ReadScratch
 from engine.store.records import DatasetInfo
 from engine.store.schema import STORE_FORMAT
-from engine.store.shard import Shard, write_shard
+from engine.store.shard import MergedShard, Shard, StageTarget, merge_on_worker, write_shard
 from engine.store.store import CCSStore
 from engine.types import Contour, ContourSet
 
@@ -264,17 +264,21 @@ def save_built(
     maximum zoom, :mod:`engine.build.labels`).
 
     Rows are made batch by batch (:data:`SAVE_BATCH` contours) on ``executor`` (None: in this process) and
-    written there into shards (:mod:`engine.store.shard`), which are merged as they come back, in order, in the
-    store's bounded write transactions (:meth:`CCSStore.save`), so only a few shards are in memory at a time
-    and no other write waits on the build. The label candidates are found on ``executor`` too: the build
-    process is left with merging, so that the save, like the build, goes faster with more workers.
+    written there into shards (:mod:`engine.store.shard`), each merged into the store in its bounded write
+    transactions (:meth:`CCSStore.save`) by the worker that made it when that worker can open the store file,
+    else by this process as it comes back; only a few shards are in memory at a time and no other write waits
+    on the build. The label candidates are found on ``executor`` too, so that the save, like the build, goes
+    faster with more workers.
     """
     meta = dataset_meta(
         built, name=name, source=source, source_hash=digest, params=params, build_seconds=build_seconds
     )
-    shards = _shards_in_batches(built, executor)
     labels = label_placer(store, executor=executor)
-    return store.save(dataset, meta, shards, only_if_building=only_if_building, labels=labels)
+
+    def shards(target: StageTarget) -> Iterator[Shard | MergedShard]:
+        return _shards_in_batches(built, None if executor is None else target, executor)
+
+    return store.save(dataset, meta, shards, built.count, only_if_building=only_if_building, labels=labels)
 
 
 #: Contours whose store rows are made, and written into one shard, by one task while a built set is written.
@@ -284,18 +288,32 @@ SAVE_BATCH = 256
 SAVE_AHEAD = 4
 
 
-def _shards_in_batches(built: BuiltSet | SpooledSet, executor: Executor | None = None) -> Iterator[Shard]:
-    """The store rows of ``built`` as shards of :data:`SAVE_BATCH` surfaces, written on ``executor`` (a spooled
-    set reads only those batches of surfaces, as the spool keeps them, and of input contours)."""
-    tasks = ((payloads, built.working_crs, inputs) for payloads, inputs in built.payloads_in_batches(SAVE_BATCH))
+def _shards_in_batches(
+    built: BuiltSet | SpooledSet, target: StageTarget | None, executor: Executor | None = None
+) -> Iterator[Shard | MergedShard]:
+    """The store rows of ``built`` as shards of :data:`SAVE_BATCH` surfaces, written on ``executor`` and merged
+    there into ``target`` when a worker can (None: all are merged by the caller), in the build's order (a
+    spooled set reads only those batches of surfaces, as the spool keeps them, and of input contours)."""
+    tasks = (
+        (payloads, built.working_crs, inputs, target, i * SAVE_BATCH)
+        for i, (payloads, inputs) in enumerate(built.payloads_in_batches(SAVE_BATCH))
+    )
     yield from map_ordered(executor, batch_shard, tasks, SAVE_AHEAD)
 
 
-def batch_shard(payloads: Sequence[CCS | bytes], working_crs: str, inputs: Sequence[Contour | bytes]) -> Shard:
+def batch_shard(
+    payloads: Sequence[CCS | bytes],
+    working_crs: str,
+    inputs: Sequence[Contour | bytes],
+    target: StageTarget | None = None,
+    offset: int = 0,
+) -> Shard | MergedShard:
     """One batch of surfaces as the spool keeps them, made into store rows (:func:`contour_rows`) and written
     into a shard: a task of a worker, which opens the surfaces and their input contours (as the reader keeps
-    them) itself, so the build process only merges."""
-    return write_shard(contour_rows([surface_of(p) for p in payloads], working_crs, [opened(c) for c in inputs]))
+    them) itself, and merges the shard into ``target`` when it can open the store file, as the ``offset``-th
+    contours of the build (:func:`~engine.store.shard.merge_on_worker`), so the build process only counts."""
+    shard = write_shard(contour_rows([surface_of(p) for p in payloads], working_crs, [opened(c) for c in inputs]))
+    return shard if target is None else merge_on_worker(target, shard, offset)
 
 
 def _reading_pool(

@@ -78,6 +78,11 @@ class BuiltSet:
     repaired: int = 0
     inputs: Sequence[Contour] = ()
 
+    @property
+    def count(self) -> int:
+        """How many surfaces (as :attr:`SpooledSet.count`)."""
+        return len(self.surfaces)
+
     def payloads_in_batches(self, size: int) -> Iterator[tuple[list[CCS], list[Contour]]]:
         """The surfaces in input order with their input contours, ``size`` at a time (as
         :meth:`SpooledSet.payloads_in_batches`; a surface in memory is its own payload)."""

@@ -1,26 +1,33 @@
 """A shard: a batch of a build's contour rows written where they were made, merged into the store by SQLite.
 
-A worker that makes a batch of store rows (``engine.build.datasets.batch_shard``) writes them into a small
-SQLite database of the store's own tables, held in memory, and returns that database's bytes
-(:class:`Shard`). The build process then only merges each shard into the store (:func:`attached`,
-:func:`merge_run`): one
-``INSERT ... SELECT`` per table run by SQLite itself, instead of unpickling every row's arrays and inserting
-them one statement at a time. The fids and piece ids a merge gives are the ones a row-by-row insert gives (the
-next free ones, in the shard's order), so the store holds the same rows under the same ids whichever way they
-were written.
+A task that makes a batch of store rows (``engine.build.datasets.batch_shard``) writes them into a small
+SQLite database of the store's own tables, held in memory (:class:`Shard`), and merges it into the store
+(:func:`merge_shard`): one ``INSERT ... SELECT`` per table run by SQLite itself, instead of unpickling every
+row's arrays and inserting them one statement at a time.
+
+Who merges: a worker that can open the store file (a local pool, a Dask cluster on one machine or on a shared
+disk) merges its own shard (:func:`merge_on_worker`), so the build process only counts what came back; a
+worker that cannot (another machine) sends the shard back and the build process merges it. Either way each
+contour takes the fid reserved for its place in the build (:func:`engine.store.staging.reserve_fids`), so the
+store holds the same rows under the same fids whoever merged them and in whatever order the batches landed.
 """
 
 from __future__ import annotations
 
+import os
 import sqlite3
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 
+from engine.errors import BuildCancelled
+from engine.store.builds import is_building
 from engine.store.codec import RowTally, contour_pieces, contour_row
+from engine.store.connection import StoreFile
 from engine.store.issues import insert_issues
 from engine.store.records import NewContour
 from engine.store.schema import PIECE_KINDS, SCHEMA
+from engine.store.staging import reservation
 
 #: The dataset id rows carry inside a shard (the merge gives them the build's staged id).
 SHARD_ID = "shard"
@@ -31,6 +38,10 @@ _CONTOUR_VALUES = (
     "contour_id, elevation, closed, grp, vanish_scale, length_m, n_rows, n_input, t_at_scale, sim_t, sim, "
     "base, top, original, original_w, sig, sig_top, sig_original"
 )
+#: A shard is merged at most this many contours, or rows, per write transaction (then the next write of anyone
+#: else may go): a batch of the sample's contours is merged in a few tens of milliseconds.
+STAGE_CONTOURS = 64
+STAGE_ROWS = 100_000
 
 
 @dataclass(frozen=True)
@@ -39,6 +50,29 @@ class Shard:
 
     data: bytes
     tally: RowTally
+
+
+@dataclass(frozen=True)
+class MergedShard:
+    """A shard that its worker merged into the store itself: only its counts come back."""
+
+    tally: RowTally
+
+
+@dataclass(frozen=True)
+class StageTarget:
+    """Where a build's rows go, as its tasks are told: the store file (an absolute path), the dataset and the
+    row id its rows are staged under, the first fid reserved for them and the token the reservation carries.
+
+    A worker that opens another file of that name (another machine's) finds another token or none, and
+    merges nothing there."""
+
+    path: str
+    dataset: str
+    stage: str
+    first_fid: int
+    token: str
+    only_if_building: bool
 
 
 def insert_contour(cur: sqlite3.Cursor, dataset: str, c: NewContour) -> int:
@@ -101,11 +135,54 @@ def fid_runs(contours: list[tuple[int, int]], most_contours: int, most_rows: int
             start, rows = i + 1, 0
 
 
-def merge_run(cur: sqlite3.Cursor, dataset: str, first: int, last: int) -> None:
+def merge_shard(store: StoreFile, target: StageTarget, shard: Shard, offset: int) -> bool:
+    """Merge ``shard``, whose first contour is the build's ``offset``-th (from 0), into ``store`` under the
+    target's staged id, a bounded run of contours per write transaction; False (nothing merged) when the store
+    holds no reservation for the target with its token.
+
+    Each run is one transaction that first checks the reservation (a build that failed, or was replaced, has
+    dropped it) and the build (with ``only_if_building``), and skips a run already there, so a task run twice
+    (a Dask worker lost after a run) merges each contour once.
+
+    Raises
+    ------
+    BuildCancelled
+        ``only_if_building`` and the dataset's build is no longer recorded (the dataset was deleted).
+    """
+    fid_base = target.first_fid + offset - 1  # the shard's fids count from 1
+    with attached(store._con(), shard) as contours:
+        for first, last in fid_runs(contours, STAGE_CONTOURS, STAGE_ROWS):
+            with store._write() as cur:
+                held = reservation(cur, target.stage)
+                if held is None or held[2] != target.token:
+                    return False
+                if target.only_if_building and not is_building(cur, target.dataset):
+                    raise BuildCancelled(f"dataset {target.dataset!r} was deleted while it built")
+                if cur.execute("SELECT 1 FROM contours WHERE fid=?", (first + fid_base,)).fetchone() is None:
+                    merge_run(cur, target.stage, first, last, fid_base)
+    return True
+
+
+#: The store files this process has opened to merge its shards into (a worker merges many).
+_OPENED: dict[str, StoreFile] = {}
+
+
+def merge_on_worker(target: StageTarget, shard: Shard, offset: int) -> Shard | MergedShard:
+    """On a worker: ``shard`` merged into the target's store file when this process can open it and it holds
+    the target's reservation (:class:`MergedShard`), else the shard itself, for the build process to merge."""
+    store = _OPENED.get(target.path)
+    if store is None:
+        if not os.path.isfile(target.path):  # another machine: never create a store there
+            return shard
+        store = _OPENED[target.path] = StoreFile(target.path)
+    return MergedShard(shard.tally) if merge_shard(store, target, shard, offset) else shard
+
+
+def merge_run(cur: sqlite3.Cursor, dataset: str, first: int, last: int, fid_base: int) -> None:
     """Copy the attached shard's contours ``first``..``last`` (fids) into the store under ``dataset``, in one
-    write transaction's cursor: the next free fids and piece ids, in the shard's order."""
+    write transaction's cursor: fid ``f`` of the shard becomes ``f + fid_base``; the pieces take the next free
+    piece ids, in the shard's order."""
     s = SHARD_SCHEMA
-    fid_base = _next_id(cur, "contours", "fid", autoincrement=True) - first
     cur.execute(
         f"INSERT INTO contours(fid, dataset, {_CONTOUR_VALUES}) SELECT fid + ?, ?, {_CONTOUR_VALUES} "
         f"FROM {s}.contours WHERE fid BETWEEN ? AND ? ORDER BY fid",
@@ -128,7 +205,7 @@ def merge_run(cur: sqlite3.Cursor, dataset: str, first: int, last: int) -> None:
         ).fetchone()
         if lo is None:
             continue
-        piece_base = _next_id(cur, f"{kind}_pieces", "piece", autoincrement=False) - lo
+        piece_base = _next_piece(cur, kind) - lo
         cur.execute(
             f"INSERT INTO {kind}_pieces(piece, fid, k, {names}) SELECT piece + ?, fid + ?, k, {names} "
             f"FROM {s}.{kind}_pieces WHERE piece BETWEEN ? AND ? ORDER BY piece",
@@ -141,10 +218,6 @@ def merge_run(cur: sqlite3.Cursor, dataset: str, first: int, last: int) -> None:
         )
 
 
-def _next_id(cur: sqlite3.Cursor, table: str, column: str, *, autoincrement: bool) -> int:
-    """The id SQLite would give the next row of ``table`` (AUTOINCREMENT: past every id ever used)."""
-    top = int(cur.execute(f"SELECT coalesce(max({column}), 0) FROM main.{table}").fetchone()[0])
-    if autoincrement:
-        row = cur.execute("SELECT seq FROM main.sqlite_sequence WHERE name=?", (table,)).fetchone()
-        top = max(top, int(row[0]) if row else 0)
-    return top + 1
+def _next_piece(cur: sqlite3.Cursor, kind: str) -> int:
+    """The piece id SQLite would give the next row of pieces of ``kind``."""
+    return int(cur.execute(f"SELECT coalesce(max(piece), 0) FROM main.{kind}_pieces").fetchone()[0]) + 1

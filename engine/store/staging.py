@@ -33,6 +33,8 @@ _PRIVATE = frozenset(_MARKERS + _OTHER)
 
 #: Contours removed per transaction by :func:`purge_some`.
 PURGE_CONTOURS = 64
+#: The ``store_meta`` key of a staged id's reservation of fids (:func:`reserve_fids`) is this and the id.
+_RESERVED = "fids:"
 
 
 def _marked(dataset: str, at: int, tag: str) -> str:
@@ -79,6 +81,7 @@ def purge_some(cur: sqlite3.Cursor, ident: str, limit: int = PURGE_CONTOURS) -> 
         raise StoreError(f"the rows {ident!r} are a stored dataset's: not removed")
     fids = [r[0] for r in cur.execute("SELECT fid FROM contours WHERE dataset=? LIMIT ?", (ident, int(limit)))]
     if not fids:
+        drop_reservation(cur, ident)
         cur.execute("DELETE FROM contour_issues WHERE dataset=?", (ident,))
         if is_private(ident):
             cur.execute("DELETE FROM labels WHERE dataset=?", (ident,))
@@ -100,7 +103,50 @@ def leftover_ids(con: sqlite3.Connection) -> list[str]:
     removed), sorted."""
     rows = {r[0] for r in con.execute("SELECT DISTINCT dataset FROM contours")}
     staged = {r[0] for r in con.execute("SELECT id FROM datasets") if is_private(r[0])}
-    return sorted((rows | staged) - live_row_ids(con))
+    reserved = {
+        r[0][len(_RESERVED) :] for r in con.execute("SELECT key FROM store_meta WHERE key >= ? AND key < ?", _PREFIX)
+    }
+    return sorted((rows | staged | reserved) - live_row_ids(con))
+
+
+#: The range of ``store_meta`` keys that are reservations.
+_PREFIX = (_RESERVED, _RESERVED[:-1] + chr(ord(_RESERVED[-1]) + 1))
+
+
+def reserve_fids(cur: sqlite3.Cursor, ident: str, count: int, token: str) -> int:
+    """Set aside the next ``count`` fids for the rows staged under ``ident``, in a write transaction's cursor,
+    and record them with ``token``; the first of them.
+
+    So the rows of a build get the same fids whoever writes them and in whatever order its batches land (a
+    worker writes its own batch at its place), and no other write takes them meanwhile: AUTOINCREMENT gives
+    fids past the highest ``sqlite_sequence`` has seen, which now counts the reserved ones."""
+    top = int(cur.execute("SELECT coalesce(max(fid), 0) FROM contours").fetchone()[0])
+    row = cur.execute("SELECT seq FROM sqlite_sequence WHERE name='contours'").fetchone()
+    first = max(top, int(row[0]) if row else 0) + 1
+    last = first + int(count) - 1
+    if row is None:
+        cur.execute("INSERT INTO sqlite_sequence(name, seq) VALUES ('contours', ?)", (last,))
+    else:
+        cur.execute("UPDATE sqlite_sequence SET seq=? WHERE name='contours'", (last,))
+    cur.execute(
+        "INSERT OR REPLACE INTO store_meta VALUES (?, ?)", (_RESERVED + ident, f"{first} {int(count)} {token}")
+    )
+    return first
+
+
+def reservation(cur: sqlite3.Cursor, ident: str) -> tuple[int, int, str] | None:
+    """(first fid, count, token) reserved for the rows staged under ``ident``, or None."""
+    row = cur.execute("SELECT value FROM store_meta WHERE key=?", (_RESERVED + ident,)).fetchone()
+    if row is None:
+        return None
+    first, count, token = str(row[0]).split(" ", 2)
+    return int(first), int(count), token
+
+
+def drop_reservation(cur: sqlite3.Cursor, ident: str) -> None:
+    """Forget the fids reserved for ``ident`` (its rows switched in or removed): a worker still running for that
+    build then finds no reservation and writes nothing."""
+    cur.execute("DELETE FROM store_meta WHERE key=?", (_RESERVED + ident,))
 
 
 def owner_of(ident: str) -> str | None:

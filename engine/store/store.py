@@ -17,6 +17,7 @@ datasets are :mod:`engine.store.builds`.
 
 from __future__ import annotations
 
+import secrets
 import sqlite3
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -53,22 +54,23 @@ from engine.store.records import (
     StoredPieces,
 )
 from engine.store.schema import PIECE_KINDS
-from engine.store.shard import Shard, attached, fid_runs, merge_run
+from engine.store.shard import MergedShard, Shard, StageTarget, merge_shard
 from engine.store.staging import (
+    drop_reservation,
     is_private,
     leftover_ids,
     owner_of,
     purge_some,
+    reserve_fids,
     row_ids,
     staging_id,
 )
 
-#: A build's rows are written at most this many contours, or rows, per transaction (then the next write of
-#: anyone else may go): a batch of the sample's contours is written in a few tens of milliseconds.
-STAGE_CONTOURS = 64
-STAGE_ROWS = 100_000
-
 T = TypeVar("T")
+
+#: What a save is given to write a dataset's rows: told where they go, the shards in the build's order, each
+#: merged already by its worker or to be merged by the build process (:mod:`engine.store.shard`).
+ShardWriter = Callable[[StageTarget], Iterable[Shard | MergedShard]]
 
 
 def pieces_sql(kind: str, by_fid: bool) -> str:
@@ -129,17 +131,21 @@ class CCSStore(BuildBook):
         self,
         dataset: str,
         meta: NewDataset,
-        shards: Iterable[Shard],
+        shards: ShardWriter,
+        count: int,
         progress: Callable[[int, int], None] | None = None,
         *,
         only_if_building: bool = False,
         labels: LabelPlacer | None = None,
     ) -> DatasetInfo:
-        """Write a dataset, replacing any previous version: staged in bounded transactions, then one switch.
+        """Write a dataset of ``count`` contours, replacing any previous version: staged in bounded
+        transactions, then one switch.
 
-        The rows come in shards (:mod:`engine.store.shard`, written where the rows were made) and are merged as
-        ``shards`` yields them (a generator keeps only a few in memory), at most :data:`STAGE_CONTOURS`
-        contours or :data:`STAGE_ROWS` rows per transaction, under the dataset's staged id
+        ``count`` fids are reserved first, and the rows come in shards (:mod:`engine.store.shard`, written where
+        the rows were made): ``shards`` is told where they go (:class:`StageTarget`) and yields them in the
+        build's order (a generator keeps only a few in memory). A shard its worker merged is only counted here;
+        any other is merged here. Each merge writes at most :data:`~engine.store.shard.STAGE_CONTOURS` contours
+        or :data:`~engine.store.shard.STAGE_ROWS` rows per transaction, under the dataset's staged id
         (:mod:`engine.store.staging`): other writes wait at most one such step, readers see nothing of it. The
         dataset's row goes in last; ``labels``, when given, is called with the staged id (its rows and row are
         readable under it) and returns the anchors. The switch is one short transaction that rewrites no contour
@@ -154,7 +160,10 @@ class CCSStore(BuildBook):
         stage = staging_id(dataset, self._stored_rows_id(dataset))
         self.purge(stage)  # what a killed build of this id left
         try:
-            counts = self._stage_shards(dataset, stage, shards, progress, only_if_building)
+            target = self._reserve(dataset, stage, count, only_if_building)
+            counts = self._stage_shards(target, shards(target), progress)
+            if counts.n != count:
+                raise StoreError(f"dataset {dataset!r}: {counts.n} contours written, {count} expected")
             with self._write() as cur:
                 self._check_building(cur, dataset, only_if_building)
                 cur.execute(
@@ -177,22 +186,22 @@ class CCSStore(BuildBook):
         if only_if_building and not is_building(cur, dataset):
             raise BuildCancelled(f"dataset {dataset!r} was deleted while it built")
 
+    def _reserve(self, dataset: str, stage: str, count: int, only_if_building: bool) -> StageTarget:
+        """Reserve the fids of a build's ``count`` rows staged under ``stage``: where its tasks write them."""
+        token = secrets.token_hex(16)
+        with self._write() as cur:
+            self._check_building(cur, dataset, only_if_building)
+            first = reserve_fids(cur, stage, count, token)
+        return StageTarget(str(self.path.resolve()), dataset, stage, first, token, only_if_building)
+
     def _stage_shards(
-        self,
-        dataset: str,
-        stage: str,
-        shards: Iterable[Shard],
-        progress: Callable[[int, int], None] | None,
-        only_if_building: bool,
+        self, target: StageTarget, shards: Iterable[Shard | MergedShard], progress: Callable[[int, int], None] | None
     ) -> RowTally:
-        """Merge the shards' rows under ``stage``, a bounded run of contours per transaction."""
+        """Count the shards as they come, in the build's order, and merge here those their workers did not."""
         counts = RowTally()
         for shard in shards:
-            with attached(self._con(), shard) as contours:
-                for first, last in fid_runs(contours, STAGE_CONTOURS, STAGE_ROWS):
-                    with self._write() as cur:
-                        self._check_building(cur, dataset, only_if_building)
-                        merge_run(cur, stage, first, last)
+            if isinstance(shard, Shard) and not merge_shard(self, target, shard, counts.n):
+                raise StoreError(f"dataset {target.dataset!r}: its build's reservation of fids was dropped")
             counts.merge(shard.tally)
             if progress:
                 progress(counts.n, counts.n)
@@ -215,6 +224,7 @@ class CCSStore(BuildBook):
             for label_fid, reason in placed.anchors.issues:
                 insert_issues(cur, stage, label_fid, [("labels", reason)])
         forget_build(cur, dataset)
+        drop_reservation(cur, stage)
         return replaced
 
     @staticmethod

@@ -59,13 +59,14 @@ def test_sample_builds_on_first_start_and_restart_serves_from_store(tmp_path):
 #: kill.
 KILLED_BUILD = """
 import os, signal, sys
+import engine.store.shard as sh
 import engine.store.store as sq
 from pathlib import Path
 from app.cli import main
 
 after = int(os.environ["KILL_AFTER_RUNS"])
 wal = Path(os.environ["STORE"] + "-wal")
-real_save, real_merge = sq.CCSStore.save, sq.merge_run
+real_save, real_merge = sq.CCSStore.save, sh.merge_run
 seen = {"runs": 0, "wal_before": 0}
 
 def save(self, *a, **k):
@@ -80,8 +81,8 @@ def merge(*a):
         signal.pause()
     seen["runs"] += 1
 
-sq.CCSStore.save, sq.merge_run = save, merge
-sq.STAGE_CONTOURS = 8  # runs of a few contours: the small source's build commits some before the kill
+sq.CCSStore.save, sh.merge_run = save, merge
+sh.STAGE_CONTOURS = 8  # runs of a few contours: the small source's build commits some before the kill
 sys.argv = ["ccsm", *sys.argv[1:]]
 main()
 """

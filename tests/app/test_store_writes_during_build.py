@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+import engine.store.shard as shard_module
 import engine.store.store as store_module
 from engine.build import job as build_job
 from engine.build.job import BuildJob
@@ -34,7 +35,7 @@ def held_build(monkeypatch, client, tmp_path):
     two contours, each its own transaction) until ``release`` is set (``reached`` is set once it is held)."""
     store = Path(client.app.state.settings.store_path)
     reached, release = threading.Event(), threading.Event()
-    monkeypatch.setattr(store_module, "STAGE_CONTOURS", 2)
+    monkeypatch.setattr(shard_module, "STAGE_CONTOURS", 2)
     real_merge = store_module.RowTally.merge
 
     def merge_then_wait(self, other):  # called once a shard's runs are committed: no lock is held here
@@ -137,7 +138,7 @@ def test_a_build_out_of_disk_says_so(client, tmp_path, monkeypatch):
     def no_room(*a, **k):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(store_module, "merge_run", no_room)
+    monkeypatch.setattr(shard_module, "merge_run", no_room)
     source = write_geojson(tmp_path / "full.geojson", synthetic_features(seed=5))
     assert build_job.run(_upload_job(store, "full", source)) == 1
     status = CCSStore(store).build_statuses()["full"]

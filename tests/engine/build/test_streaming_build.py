@@ -107,12 +107,15 @@ def clusters_source(tmp_path_factory) -> Path:
 
 
 def stored_rows(store: CCSStore, dataset: str) -> list[tuple]:
+    """The dataset's contour rows in fid order, each with its fid counted from the dataset's first (so two
+    stores' rows compare, fids included); never none (a dataset with no row would make comparisons vacuous)."""
     rows = store._con().execute(
-        "SELECT contour_id, elevation, base, top, original, t_at_scale, sim, sig, vanish_scale FROM contours "
+        "SELECT fid, contour_id, elevation, base, top, original, t_at_scale, sim, sig, vanish_scale FROM contours "
         "WHERE dataset=? ORDER BY fid",
-        (dataset,),
-    )
-    return [tuple(r) for r in rows]
+        (store._rows_of(dataset),),
+    ).fetchall()
+    assert rows, f"no rows stored for {dataset!r}"
+    return [(r[0] - rows[0][0], *r[1:]) for r in rows]
 
 
 def test_a_store_build_through_the_scratch_file_writes_the_rows_of_an_in_memory_build(
@@ -145,23 +148,40 @@ class RecordingExecutor(Executor):
         return self.inner.submit(fn, *args, **kwargs)
 
 
-def test_rows_and_label_candidates_made_on_an_executor_are_stored_as_made_in_the_build_process(tmp_path) -> None:
+def test_rows_and_label_candidates_made_on_an_executor_are_stored_as_made_in_the_build_process(
+    tmp_path, monkeypatch
+) -> None:
+    import engine.store.shard as shard
+
     z = fractal_heights(11, 3.0, n=64, relief_m=200.0).astype(np.float32)
     dem = write_geotiff(tmp_path / "t.tif", z, west=740_000.0, north=4_060_000.0, cell=30.0, crs="EPSG:32616")
     spec = SourceSpec(dem, "t", "t", interval=10.0)
     here = CCSStore(tmp_path / "here.sqlite")
     build_dataset(here, spec, workers=1)
     pooled = CCSStore(tmp_path / "pool.sqlite")
+    build_dataset(pooled, SourceSpec(dem, "earlier", "earlier", interval=20.0), workers=1)  # fids taken before
+
+    build_process, merge_run = os.getpid(), shard.merge_run
+
+    def on_workers_only(*args: object) -> None:  # the pool's processes are forked with this patch
+        assert os.getpid() != build_process, "a shard was merged in the build process"
+        merge_run(*args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(shard, "merge_run", on_workers_only)
     with local_pool(2) as pool:
         executor = RecordingExecutor(pool)
         build_dataset(pooled, spec, executor=executor)
-    # The worker processes made the rows and found the labels' candidates, several tasks of each.
+    # The worker processes made the rows, merged them into the store and found the labels' candidates, several
+    # tasks of each; the rows take the fids after the earlier dataset's, in input order.
     assert executor.ran.count("batch_shard") > 1 and executor.ran.count("batch_candidates") > 1, executor.ran
     assert stored_rows(pooled, "t") == stored_rows(here, "t")
+    assert pooled.all_fids("t")[0] == pooled.all_fids("earlier")[-1] + 1
     mine, theirs = here.labels("t"), pooled.labels("t")
     assert mine is not None and theirs is not None and len(mine.anchors) > 10
-    for column in ("xy", "angle", "min_zoom", "fid", "rank", "elevation", "box_px"):
+    for column in ("xy", "angle", "min_zoom", "rank", "elevation", "box_px"):
         assert_array_equal(getattr(theirs.anchors, column), getattr(mine.anchors, column))
+    shift = pooled.all_fids("t")[0] - here.all_fids("t")[0]
+    assert_array_equal(theirs.anchors.fid - shift, mine.anchors.fid)
     assert theirs.anchors.text == mine.anchors.text
 
 

@@ -1,23 +1,27 @@
 """Shards: rows written apart from the store (by the worker that made them) and merged into it by SQLite.
 
 The merge must give what a row-by-row write gives: the next free fids (past every fid the store ever used), each
-contour's pieces, R*Tree entries and issues under its own new fid, and the rows unchanged. Checked on contours
-generated here, merged into a store that already holds, and has deleted, other datasets.
+contour's pieces, R*Tree entries and issues under its own new fid, and the rows unchanged; and the same whether
+the build process merges the shards in order or the workers merge them themselves, in any order, some twice.
+Checked on contours generated here, merged into a store that already holds, and has deleted, other datasets.
 """
 
 from __future__ import annotations
 
 import sqlite3
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import engine.store.store as store_module
+import engine.store.shard as shard_module
+from engine.errors import StoreError
 from engine.store.codec import piece_count, piece_rows
 from engine.store.records import NewContour, NewDataset
-from engine.store.shard import attached, fid_runs, write_shard
+from engine.store.shard import MergedShard, Shard, StageTarget, attached, fid_runs, merge_on_worker, write_shard
+from engine.store.staging import leftover_ids
 from engine.store.store import CCSStore
 
 #: Rows per contour drawn here: past PIECE_ROWS, so that contours of one, two and three pieces occur.
@@ -79,6 +83,11 @@ def _meta(name: str) -> NewDataset:
     )
 
 
+def _save(store: CCSStore, name: str, shards: list[Shard]) -> None:
+    """Store ``shards`` as dataset ``name``, merged by the store in order (as a build without workers does)."""
+    store.save(name, _meta(name), lambda _target: shards, sum(shard.tally.n for shard in shards))
+
+
 def _assert_stored(store: CCSStore, dataset: str, fid: int, c: NewContour) -> None:
     """Contour ``fid`` of ``dataset`` is ``c``: its row, pieces, R*Tree entry and issues."""
     (record,) = store.load([fid])
@@ -99,6 +108,15 @@ def _assert_stored(store: CCSStore, dataset: str, fid: int, c: NewContour) -> No
             assert np.array_equal(pieces.columns[0][starts[k] : starts[k + 1]], rows[piece_rows(len(rows), k)])
 
 
+def _store_with_history(path, earlier: list[NewContour]) -> CCSStore:  # noqa: ANN001 - a path
+    """A store holding dataset "kept" (the first of ``earlier``) and having held "gone" (all of them)."""
+    store = CCSStore(path)
+    _save(store, "kept", [write_shard(earlier[:1])])
+    _save(store, "gone", [write_shard(earlier)])
+    store.delete("gone")  # its fids are never given again
+    return store
+
+
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
     earlier=st.lists(new_contours(), min_size=1, max_size=4),
@@ -112,14 +130,12 @@ def test_merged_shards_hold_every_row_under_the_next_free_fids(
     batches: list[list[NewContour]],
     stage_contours: int,
 ) -> None:
-    monkeypatch.setattr(store_module, "STAGE_CONTOURS", stage_contours)  # several merge steps per shard
-    store = CCSStore(tmp_path_factory.mktemp("shards") / "store.sqlite")
-    store.save("kept", _meta("kept"), [write_shard(earlier[:1])])
-    store.save("gone", _meta("gone"), [write_shard(earlier)])
-    used = max(store.all_fids("gone"))
-    store.delete("gone")  # its fids are never given again
+    monkeypatch.setattr(shard_module, "STAGE_CONTOURS", stage_contours)  # several merge steps per shard
+    store = _store_with_history(tmp_path_factory.mktemp("shards") / "store.sqlite", earlier)
+    used = int(store._con().execute("SELECT seq FROM sqlite_sequence WHERE name='contours'").fetchone()[0])
 
-    info = store.save("b", _meta("b"), [write_shard(batch) for batch in batches])
+    shards = [write_shard(batch) for batch in batches]
+    info = store.save("b", _meta("b"), lambda _target: shards, sum(len(batch) for batch in batches))
 
     merged = [c for batch in batches for c in batch]
     fids = store.all_fids("b")
@@ -141,6 +157,119 @@ def test_merged_shards_hold_every_row_under_the_next_free_fids(
         max(c.box[3] for c in merged),
     )
     assert store.integrity_ok()
+
+
+def _dump(store: CCSStore, dataset: str) -> dict[str, list[tuple]]:
+    """Every row the store holds for ``dataset``, by table, in fid order (pieces by fid and k: their own ids
+    are the store's business)."""
+    con, rows = store._con(), store._rows_of(dataset)
+    out = {
+        "contours": con.execute("SELECT * FROM contours WHERE dataset=? ORDER BY fid", (rows,)).fetchall(),
+        "rtree": con.execute("SELECT * FROM contour_rtree WHERE dataset=? ORDER BY fid", (rows,)).fetchall(),
+        "issues": con.execute("SELECT * FROM contour_issues WHERE dataset=? ORDER BY fid, rowid", (rows,)).fetchall(),
+    }
+    for kind in ("ccs", "original"):
+        out[kind] = con.execute(
+            f"SELECT p.fid, p.k, r.minx, r.maxx, r.miny, r.maxy, p.* FROM {kind}_pieces p "
+            f"JOIN {kind}_piece_rtree r ON r.piece = p.piece WHERE r.dataset=? ORDER BY p.fid, p.k",
+            (rows,),
+        ).fetchall()
+        out[kind] = [row[:6] + row[9:] for row in out[kind]]  # without the piece id and the repeated fid, k
+    return out
+
+
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    earlier=st.lists(new_contours(), min_size=1, max_size=3),
+    batches=st.lists(st.lists(new_contours(), min_size=1, max_size=4), min_size=1, max_size=4),
+    stage_contours=st.integers(1, 3),
+    data=st.data(),
+)
+def test_shards_merged_by_their_workers_in_any_order_are_stored_as_merged_in_order(
+    tmp_path_factory: pytest.TempPathFactory,
+    monkeypatch: pytest.MonkeyPatch,
+    earlier: list[NewContour],
+    batches: list[list[NewContour]],
+    stage_contours: int,
+    data: st.DataObject,
+) -> None:
+    monkeypatch.setattr(shard_module, "STAGE_CONTOURS", stage_contours)
+    root = tmp_path_factory.mktemp("workers")
+    in_order = _store_with_history(root / "in_order.sqlite", earlier)
+    by_workers = _store_with_history(root / "by_workers.sqlite", earlier)
+    shards = [write_shard(batch) for batch in batches]
+    offsets = np.concatenate([[0], np.cumsum([len(batch) for batch in batches])]).tolist()
+    landed = data.draw(st.permutations(range(len(shards))), label="order the workers' merges land in")
+    again = data.draw(st.sets(st.sampled_from(range(len(shards)))), label="tasks run twice (a worker lost)")
+
+    def merged_by_workers(target: StageTarget) -> list[MergedShard | Shard]:
+        came_back = {}
+        for i in landed:
+            came_back[i] = merge_on_worker(target, shards[i], offsets[i])
+            if i in again:
+                came_back[i] = merge_on_worker(target, shards[i], offsets[i])
+        return [came_back[i] for i in range(len(shards))]
+
+    _save(in_order, "b", shards)
+    info = by_workers.save("b", _meta("b"), merged_by_workers, offsets[-1])
+    assert _dump(by_workers, "b") == _dump(in_order, "b")
+    assert len(_dump(by_workers, "b")["contours"]) == info.n_contours == offsets[-1]
+    assert by_workers.integrity_ok()
+
+
+@settings(max_examples=5, deadline=None)
+@given(contour=new_contours())
+def test_a_worker_that_cannot_open_the_builds_store_sends_its_shard_back(
+    tmp_path_factory: pytest.TempPathFactory, contour: NewContour
+) -> None:
+    root = tmp_path_factory.mktemp("elsewhere")
+    shard = write_shard([contour])
+    # Another machine's store at the same path holds no reservation of this build (or another token).
+    other = CCSStore(root / "store.sqlite")
+    _save(other, "d", [write_shard([contour])])
+    target = StageTarget(str(root / "store.sqlite"), "d", "\x01sd", 1, "not its token", False)
+    before = _dump(other, "d")
+    assert merge_on_worker(target, shard, 0) is shard
+    assert _dump(other, "d") == before and leftover_ids(other._con()) == []
+    # No file at that path at all: none is made there.
+    nowhere = StageTarget(str(root / "nowhere.sqlite"), "d", "\x01sd", 1, "token", False)
+    assert merge_on_worker(nowhere, shard, 0) is shard
+    assert not (root / "nowhere.sqlite").exists()
+
+
+@settings(max_examples=5, deadline=None)
+@given(contours=st.lists(new_contours(), min_size=2, max_size=2))
+def test_a_worker_still_merging_after_its_build_failed_leaves_nothing(
+    tmp_path_factory: pytest.TempPathFactory, contours: list[NewContour]
+) -> None:
+    store = CCSStore(tmp_path_factory.mktemp("failed") / "store.sqlite")
+    told: list[StageTarget] = []
+
+    def fails_after_one(target: StageTarget) -> Iterator[MergedShard | Shard]:
+        told.append(target)
+        yield merge_on_worker(target, write_shard(contours[:1]), 0)
+        raise RuntimeError("a task failed")
+
+    with pytest.raises(RuntimeError, match="a task failed"):
+        store.save("d", _meta("d"), fails_after_one, 2)
+    # The other task lands after the build gave up: its reservation is gone, so it merges nothing.
+    late = merge_on_worker(told[0], write_shard(contours[1:]), 1)
+    assert isinstance(late, Shard)
+    assert store._con().execute("SELECT count(*) FROM contours").fetchone()[0] == 0
+    assert leftover_ids(store._con()) == [] and store.dataset_ids() == []
+
+
+@settings(max_examples=5, deadline=None)
+@given(contours=st.lists(new_contours(), min_size=1, max_size=3))
+def test_a_save_whose_shards_miss_contours_stores_nothing(
+    tmp_path_factory: pytest.TempPathFactory, contours: list[NewContour]
+) -> None:
+    store = CCSStore(tmp_path_factory.mktemp("short") / "store.sqlite")
+    n = len(contours)
+    with pytest.raises(StoreError, match=f"{n} contours written, {n + 1} expected"):
+        store.save("d", _meta("d"), lambda _target: [write_shard(contours)], n + 1)
+    assert store.dataset_ids() == [] and leftover_ids(store._con()) == []
+    assert store._con().execute("SELECT count(*) FROM contours").fetchone()[0] == 0
 
 
 @given(
