@@ -13,15 +13,18 @@
      optimal);
    - the client: today every result comes back to the client, which does its serial part of the phase
      (``k x`` its CPU) and reads every byte the tasks send back (at ``--client-mb-s``);
-   - the scheduler: ``--sched-ms`` of its CPU per task (Dask's documented order of magnitude).
+   - the scheduler: ``--sched-ms`` of its CPU per task (Dask's documented order of magnitude);
+   - the store's writer: today the rows of every task go into one SQLite file, each worker merging its own
+     shard under the file's one write lock, so the merges run one at a time: ``k x`` the seconds the tasks
+     spent inside them (``writer s``).
    The second scenario, *shards*, is issue 26 item 2: each block's task traces, builds, repairs, labels and
    writes its own shard, so the client's per-contour CPU moves to the workers (added to their share), the client
    only plans (``--plan-ms`` per task) and nothing comes back but a small record; the export then merges the
    shards in one streaming pass at ``--merge-mb-s``, on the archive's size.
 
-Every assumption is an option and printed with the result. What the model leaves out: the store's single
-SQLite writer in today's design is counted as client CPU (it is), but disk bandwidth of the shards and the
-network between workers are not modelled beyond the client's read rate.
+Every assumption is an option and printed with the result. What the model leaves out: disk bandwidth of the
+shards and the network between workers are not modelled beyond the client's read rate and the writer's
+measured seconds.
 
 Usage: python bench/simulate_cluster.py [--side 1024] [--interval 20] [--workers 16,64] [--vertices 1e8,1e10]
 """
@@ -51,13 +54,30 @@ ARCHIVE_BYTES_PER_VERTEX = 33.78e6 / 2_613_572
 
 
 def timed_call(fn: Callable[..., Any], args: tuple[Any, ...], kwargs: dict[str, Any]) -> tuple[Any, ...]:
-    """Run one task where it is sent; its result, CPU seconds and the pickled sizes of its input and output."""
+    """Run one task where it is sent; its result, CPU seconds, the pickled sizes of its input and output, and
+    the seconds it spent merging rows into the store (under the store's one write lock)."""
+    import engine.store.shard as shard
+
+    merging = [0.0]
+    real_merge = shard.merge_shard
+
+    def timed_merge(*a: Any, **k: Any) -> bool:
+        start = time.perf_counter()
+        try:
+            return real_merge(*a, **k)
+        finally:
+            merging[0] += time.perf_counter() - start
+
     size_in = len(pickle.dumps((fn, args, kwargs), protocol=pickle.HIGHEST_PROTOCOL))
-    cpu0 = time.process_time()
-    result = fn(*args, **kwargs)
-    cpu = time.process_time() - cpu0
+    shard.merge_shard = timed_merge
+    try:
+        cpu0 = time.process_time()
+        result = fn(*args, **kwargs)
+        cpu = time.process_time() - cpu0
+    finally:
+        shard.merge_shard = real_merge
     size_out = len(pickle.dumps(result, protocol=pickle.HIGHEST_PROTOCOL))
-    return result, cpu, size_in, size_out
+    return result, cpu, size_in, size_out, merging[0]
 
 
 @dataclass
@@ -67,6 +87,7 @@ class Task:
     cpu: float = 0.0
     size_in: int = 0
     size_out: int = 0
+    writer: float = 0.0
 
 
 @dataclass
@@ -84,7 +105,7 @@ class TimingExecutor(Executor):
 
         def done(inner: Future[Any]) -> None:
             try:
-                result, task.cpu, task.size_in, task.size_out = inner.result()
+                result, task.cpu, task.size_in, task.size_out, task.writer = inner.result()
             except BaseException as exc:  # noqa: BLE001 - handed on to whoever waits for the task
                 outer.set_exception(exc)
             else:
@@ -106,6 +127,7 @@ class Phase:
     client_cpu: float
     bytes_back: int
     bytes_out: int
+    writer: float
 
 
 def measure(dem: Path, interval: float) -> tuple[list[Phase], int, float, float, int]:
@@ -140,6 +162,7 @@ def measure(dem: Path, interval: float) -> tuple[list[Phase], int, float, float,
             marks[i + 1] - marks[i],
             sum(t.size_out for t in r),
             sum(t.size_in for t in r),
+            sum(t.writer for t in r),
         )
         for i, r in enumerate(runs)
     ]
@@ -160,6 +183,7 @@ def merged(phases: list[Phase]) -> list[Phase]:
                 q.client_cpu + p.client_cpu,
                 q.bytes_back + p.bytes_back,
                 q.bytes_out + p.bytes_out,
+                q.writer + p.writer,
             )
         else:
             out[p.name] = p
@@ -172,13 +196,15 @@ def predict(phases: list[Phase], k: float, workers: int, args: argparse.Namespac
     for p in phases:
         tasks = p.tasks * k
         sched = tasks * args.sched_ms / 1000
-        if shards:
+        if shards:  # each block writes its own file: no shared writer
             work = (p.worker_cpu + p.client_cpu) * k / workers + p.longest
             client = tasks * args.plan_ms / 1000
+            writer = 0.0
         else:
             work = p.worker_cpu * k / workers + p.longest
             client = p.client_cpu * k + p.bytes_back * k / (args.client_mb_s * 1e6)
-        total += max(work, client, sched)
+            writer = p.writer * k
+        total += max(work, client, sched, writer)
     return total
 
 
@@ -209,11 +235,11 @@ def main() -> None:
         f"peak RSS of the client {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB"
     )
     head = f"{'phase (task)':>28} {'tasks':>6} {'worker CPU s':>12} {'longest s':>9} {'client CPU s':>12}"
-    print(f"{head} {'MB back':>8}")
+    print(f"{head} {'MB back':>8} {'writer s':>8}")
     for p in merged(phases):
         print(
             f"{p.name:>28} {p.tasks:6d} {p.worker_cpu:12.2f} {p.longest:9.3f} {p.client_cpu:12.2f} "
-            f"{p.bytes_back / 1e6:8.1f}"
+            f"{p.bytes_back / 1e6:8.1f} {p.writer:8.2f}"
         )
     print(
         f"assumptions: scheduler {args.sched_ms} ms/task; with shards the client plans {args.plan_ms} ms/task; "

@@ -163,7 +163,7 @@ def merge_shard(store: StoreFile, target: StageTarget, shard: Shard, offset: int
     return True
 
 
-#: The store files this process has opened to merge its shards into (a worker merges many).
+#: The store files this process has opened to merge its shards into (a worker merges many), by path.
 _OPENED: dict[str, StoreFile] = {}
 
 
@@ -172,10 +172,26 @@ def merge_on_worker(target: StageTarget, shard: Shard, offset: int) -> Shard | M
     the target's reservation (:class:`MergedShard`), else the shard itself, for the build process to merge."""
     store = _OPENED.get(target.path)
     if store is None:
-        if not os.path.isfile(target.path):  # another machine: never create a store there
+        if not _holds_reservation(target):  # no file there, or another one: never create or touch it
             return shard
         store = _OPENED[target.path] = StoreFile(target.path)
     return MergedShard(shard.tally) if merge_shard(store, target, shard, offset) else shard
+
+
+def _holds_reservation(target: StageTarget) -> bool:
+    """True when the file at the target's path is a store holding the target's reservation, read without
+    writing (opening a store to write first makes its tables)."""
+    if not os.path.isfile(target.path):
+        return False
+    try:
+        con = sqlite3.connect(f"file:{target.path}?mode=ro", uri=True)
+        try:
+            held = reservation(con.cursor(), target.stage)
+        finally:
+            con.close()
+    except sqlite3.DatabaseError:  # not a store (no store_meta), or not SQLite at all
+        return False
+    return held is not None and held[2] == target.token
 
 
 def merge_run(cur: sqlite3.Cursor, dataset: str, first: int, last: int, fid_base: int) -> None:

@@ -231,10 +231,19 @@ def test_a_worker_that_cannot_open_the_builds_store_sends_its_shard_back(
     before = _dump(other, "d")
     assert merge_on_worker(target, shard, 0) is shard
     assert _dump(other, "d") == before and leftover_ids(other._con()) == []
-    # No file at that path at all: none is made there.
+    # No file at that path at all: none is made there. Another kind of file: it is not touched.
     nowhere = StageTarget(str(root / "nowhere.sqlite"), "d", "\x01sd", 1, "token", False)
     assert merge_on_worker(nowhere, shard, 0) is shard
     assert not (root / "nowhere.sqlite").exists()
+    for name, content in (("text.sqlite", b"not a database"), ("other.sqlite", None)):
+        path = root / name
+        if content is None:
+            sqlite3.connect(path).execute("CREATE TABLE t(x)").connection.commit()
+        else:
+            path.write_bytes(content)
+        before_bytes = path.read_bytes()
+        assert merge_on_worker(StageTarget(str(path), "d", "\x01sd", 1, "token", False), shard, 0) is shard
+        assert path.read_bytes() == before_bytes, name
 
 
 @settings(max_examples=5, deadline=None)
