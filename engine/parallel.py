@@ -21,6 +21,7 @@ from threadpoolctl import ThreadpoolController, threadpool_limits
 
 from engine.errors import InvalidParameter
 from engine.heap import keep_big_buffers_out_of_the_heap
+from engine.payloads import FileUnreachable
 
 P = ParamSpec("P")
 R = TypeVar("R")
@@ -131,6 +132,7 @@ def map_ordered(
     *,
     weight: Callable[[tuple[Any, ...]], int] | None = None,
     budget: int | None = None,
+    refetch: Callable[[tuple[Any, ...]], tuple[Any, ...]] | None = None,
 ) -> Iterator[R]:
     """``fn(*task)`` for every task, yielded in the tasks' order; in this process when ``executor`` is None.
 
@@ -138,24 +140,45 @@ def map_ordered(
     tasks that loads each task's data (a block's surfaces from a spool) holds only that many at once. With
     ``weight`` (a task's size in bytes, say) and ``budget``, no new task is read while those in flight weigh
     ``budget`` or more: a few heavy tasks then fill the look-ahead as many light ones do.
+
+    A task that names its data by where it lies in a file of this process (:class:`~engine.payloads.FileSlice`)
+    and lands on a worker that cannot read it (:class:`~engine.payloads.FileUnreachable`) is sent again as
+    ``refetch`` makes it, with its data.
     """
     if executor is None:
         with threadpool_limits(1):
             for task in tasks:
                 yield fn(*task)
         return
-    pending: deque[tuple[Future[R], int]] = deque()
+    pending: deque[tuple[Future[R], int, tuple[Any, ...]]] = deque()
     in_flight = 0
     for task in tasks:
         w = weight(task) if weight is not None else 0
-        pending.append((executor.submit(fn, *task), w))
+        pending.append((executor.submit(fn, *task), w, task))
         in_flight += w
         while pending and (len(pending) >= ahead or (budget is not None and in_flight >= budget)):
-            future, done = pending.popleft()
+            future, done, sent = pending.popleft()
             in_flight -= done
-            yield future.result()
+            yield _result(executor, fn, future, sent, refetch)
     while pending:
-        yield pending.popleft()[0].result()
+        future, _, sent = pending.popleft()
+        yield _result(executor, fn, future, sent, refetch)
+
+
+def _result(
+    executor: Executor,
+    fn: Callable[..., R],
+    future: Future[R],
+    task: tuple[Any, ...],
+    refetch: Callable[[tuple[Any, ...]], tuple[Any, ...]] | None,
+) -> R:
+    """A task's result; sent again as ``refetch`` makes it when its worker could not read this process's file."""
+    try:
+        return future.result()
+    except FileUnreachable:
+        if refetch is None:
+            raise
+        return executor.submit(fn, *refetch(task)).result()
 
 
 def lower_priority(niceness: int, *, idle: bool = False) -> None:

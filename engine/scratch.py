@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any, overload
 
 from engine.errors import StoreError
-from engine.payloads import pickled
+from engine.payloads import FileSlice, pickled
 from engine.types import Contour
 
 #: Name prefix of scratch files, followed by the host and the process id of the build that writes it.
@@ -262,6 +262,7 @@ class DiskSpool:
         # Where each number's pickle lies; length -1: nothing kept under that number.
         self._offset = array("q")
         self._length = array("q")
+        self._sliced = True  # workers are sent where surfaces lie until one cannot read the file
 
     def put(self, index: int, surface: Any) -> None:  # noqa: D102
         self.put_many([(index, surface)])
@@ -313,6 +314,31 @@ class DiskSpool:
         if missing:
             raise KeyError(f"not in the spool: {missing[:5]}")
         return [os.pread(self._fd, self._length[i], self._offset[i]) for i in wanted]
+
+    def get_slices(self, indices: Sequence[int]) -> list[FileSlice] | None:
+        """Where the surfaces numbered ``indices`` lie in the file (each pickle is written once and never
+        moved, so a slice stays valid after its number is put again), for a worker on this machine or disk to
+        read them itself (``engine.payloads.fetched``): this process then reads and sends none of their bytes.
+        None after :meth:`stop_slices`.
+
+        Raises
+        ------
+        KeyError
+            A number holds nothing.
+        """
+        if not self._sliced:
+            return None
+        wanted = [int(i) for i in indices]
+        kept = len(self._length)
+        missing = [i for i in wanted if not 0 <= i < kept or self._length[i] < 0]
+        if missing:
+            raise KeyError(f"not in the spool: {missing[:5]}")
+        path = os.path.abspath(self.path)  # a worker may run in another directory
+        return [FileSlice(path, self._offset[i], self._length[i]) for i in wanted]
+
+    def stop_slices(self) -> None:
+        """Send the surfaces themselves from now on (a worker could not read the file)."""
+        self._sliced = False
 
     def close(self) -> None:
         """Delete the file."""

@@ -16,6 +16,7 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor
 from contextlib import AbstractContextManager, contextmanager, nullcontext
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +32,7 @@ from engine.io.dem import DEM_SUFFIXES, source_uphill_side
 from engine.io.source import Source, is_dem, read_source, source_file
 from engine.parallel import map_ordered
 from engine.params import BuildParams
-from engine.payloads import opened
+from engine.payloads import FileSlice, fetched, opened
 from engine.scratch import DiskSpool, ReadScratch
 from engine.store.records import DatasetInfo
 from engine.store.schema import STORE_FORMAT
@@ -293,26 +294,36 @@ def _shards_in_batches(
 ) -> Iterator[Shard | MergedShard]:
     """The store rows of ``built`` as shards of :data:`SAVE_BATCH` surfaces, written on ``executor`` and merged
     there into ``target`` when a worker can (None: all are merged by the caller), in the build's order (a
-    spooled set reads only those batches of surfaces, as the spool keeps them, and of input contours)."""
+    spooled set reads only those batches of surfaces, as the spool keeps them, and of input contours; a worker
+    that can read the spool's file is sent only where its surfaces lie)."""
+    batches = built.payloads_in_batches(SAVE_BATCH, sliced=executor is not None)
     tasks = (
-        (payloads, built.working_crs, inputs, target, i * SAVE_BATCH)
-        for i, (payloads, inputs) in enumerate(built.payloads_in_batches(SAVE_BATCH))
+        (surfaces, built.working_crs, inputs, target, i * SAVE_BATCH) for i, (surfaces, inputs) in enumerate(batches)
     )
-    yield from map_ordered(executor, batch_shard, tasks, SAVE_AHEAD)
+    yield from map_ordered(executor, batch_shard, tasks, SAVE_AHEAD, refetch=partial(_with_surfaces, built))
+
+
+def _with_surfaces(built: BuiltSet | SpooledSet, task: tuple[Any, ...]) -> tuple[Any, ...]:
+    """A shard's task sent again when its worker cannot read the spool's file: with the surfaces read here,
+    and no task sliced from then on."""
+    built.stop_slices()
+    return (fetched(task[0]), *task[1:])
 
 
 def batch_shard(
-    payloads: Sequence[CCS | bytes],
+    payloads: Sequence[CCS | bytes | FileSlice],
     working_crs: str,
     inputs: Sequence[Contour | bytes],
     target: StageTarget | None = None,
     offset: int = 0,
 ) -> Shard | MergedShard:
     """One batch of surfaces as the spool keeps them, made into store rows (:func:`contour_rows`) and written
-    into a shard: a task of a worker, which opens the surfaces and their input contours (as the reader keeps
-    them) itself, and merges the shard into ``target`` when it can open the store file, as the ``offset``-th
-    contours of the build (:func:`~engine.store.shard.merge_on_worker`), so the build process only counts."""
-    shard = write_shard(contour_rows([surface_of(p) for p in payloads], working_crs, [opened(c) for c in inputs]))
+    into a shard: a task of a worker, which reads the surfaces where they lie in the spool's file when told so,
+    opens them and their input contours (as the reader keeps them) itself, and merges the shard into ``target``
+    when it can open the store file, as the ``offset``-th contours of the build
+    (:func:`~engine.store.shard.merge_on_worker`), so the build process only counts."""
+    surfaces = [surface_of(p) for p in fetched(payloads)]
+    shard = write_shard(contour_rows(surfaces, working_crs, [opened(c) for c in inputs]))
     return shard if target is None else merge_on_worker(target, shard, offset)
 
 

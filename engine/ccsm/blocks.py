@@ -17,10 +17,10 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -37,7 +37,7 @@ from engine.ccsm.topology import (
 )
 from engine.heap import release_free_memory
 from engine.parallel import map_ordered
-from engine.payloads import opened
+from engine.payloads import FileSlice, fetched, opened
 from engine.types import Coords
 
 if TYPE_CHECKING:
@@ -325,16 +325,45 @@ def _runs(pieces: NDArray[np.intp], owner: NDArray[np.integer]) -> tuple[NDArray
     return pieces[np.concatenate([[0], breaks])], pieces[np.concatenate([breaks, [len(pieces)]]) - 1]
 
 
+class NearSlice(NamedTuple):
+    """Rows ``first`` .. ``last`` of the surface that lies at ``whole`` in the spool's file: a near stretch for
+    a worker that reads the spool itself to cut (:func:`_block_tasks`)."""
+
+    whole: FileSlice
+    first: int
+    last: int
+
+
+#: What a block's task gets for each of its surfaces (:func:`_block_tasks`).
+NearItem = SurfaceRows | bytes | FileSlice | NearSlice
+
+
 def block_contacts(
-    near: Sequence[SurfaceRows | bytes], own: Sequence[int], ladder: NDArray[np.float64], steps: Sequence[int]
+    near: Sequence[NearItem], own: Sequence[int], ladder: NDArray[np.float64], steps: Sequence[int]
 ) -> set[tuple[int, int]]:
     """Pairs (i, j), i < j, of local indices (into ``near``) whose slices meet at some checked step, each with
     an ``own`` surface in it. The surfaces come as :func:`_block_tasks` sends them: the block's own as the
-    spool keeps them (opened here, in the worker, :func:`~engine.payloads.opened`), the others cut to their
-    near stretches."""
-    pairs = new_contact_pairs([opened(p) for p in near], ladder, steps, set(own))
+    spool keeps them, or where they lie in its file (read and opened here, in the worker), the others cut to
+    their near stretches, or where their whole surface lies with the rows to cut here.
+
+    Raises
+    ------
+    FileUnreachable
+        This worker cannot read the spool's file: the task goes again with its surfaces.
+    """
+    pairs = new_contact_pairs(near_surfaces(near), ladder, steps, set(own))
     release_free_memory()  # a worker's next block starts from what this one freed
     return pairs
+
+
+def near_surfaces(near: Sequence[NearItem]) -> list[SurfaceRows]:
+    """A block task's surfaces as the contact check reads them: read where they lie in the spool's file (each
+    file opened once), opened, and the near ones cut to their stretches."""
+    blobs = fetched([item.whole if isinstance(item, NearSlice) else item for item in near])
+    return [
+        _stretch(surface_of(cast(bytes, blob)), item.first, item.last) if isinstance(item, NearSlice) else opened(blob)
+        for item, blob in zip(near, blobs, strict=True)
+    ]
 
 
 def input_touches(spool: Spool) -> InputTouches:
@@ -362,13 +391,27 @@ def _block_tasks(
     ladder: NDArray[np.float64],
     steps: list[int],
     cache: NearCache | None = None,
+    *,
+    sliced: bool = False,
 ) -> Iterator[tuple[Any, ...]]:
     """One task per block, each block's surfaces read from the spool only when its task is sent: its own
     surfaces as the spool keeps them, every other one cut to its near stretch here, so that a long contour
     passing by is not shipped whole to every block it passes (a task's size follows the block's rows). The
-    surfaces are read through ``cache`` (None: a new one)."""
+    surfaces are read through ``cache`` (None: a new one).
+
+    ``sliced`` (the tasks go to workers): where the spool can say where its surfaces lie in its file
+    (:meth:`Spool.get_slices`), a task carries only that, and the worker reads and cuts them itself, so this
+    process reads, opens and sends none of their bytes."""
     cache = cache if cache is not None else NearCache(spool)
     for b in blocks:
+        slices = spool.get_slices(b.near.tolist()) if sliced else None
+        if slices is not None:
+            near_slices: list[NearItem] = [
+                whole if f < 0 else NearSlice(whole, f, la)
+                for whole, f, la in zip(slices, b.first.tolist(), b.last.tolist(), strict=True)
+            ]
+            yield near_slices, np.flatnonzero(b.own).tolist(), ladder, steps
+            continue
         near: list[CCS | bytes | NearStretch] = []
         # A few surfaces read at a time: whole, the long contours passing by a block can weigh far more than
         # their stretches, and the block's task holds only those.
@@ -455,8 +498,23 @@ BLOCK_TASK_BUDGET_BYTES = 48 << 20
 
 
 def _task_bytes(task: tuple[Any, ...]) -> int:
-    """About the bytes of a block task's surfaces: their payloads as the spool keeps them, or their rows."""
-    return sum(len(p) if isinstance(p, bytes) else p.base.nbytes + p.top.nbytes for p in task[0])
+    """About the bytes this process holds of a block task's surfaces: their payloads as the spool keeps them,
+    or their rows (none for the slices of a file the worker reads itself)."""
+    return sum(
+        len(p) if isinstance(p, bytes) else 0 if isinstance(p, (FileSlice, NearSlice)) else p.base.nbytes + p.top.nbytes
+        for p in task[0]
+    )
+
+
+def _with_surfaces(spool: Spool) -> Callable[[tuple[Any, ...]], tuple[Any, ...]]:
+    """How a block's task is sent again when its worker cannot read the spool's file: with its surfaces read
+    and cut here (as the spool's file is this process's own), and no task sliced from then on."""
+
+    def again(task: tuple[Any, ...]) -> tuple[Any, ...]:
+        spool.stop_slices()
+        return (near_surfaces(task[0]), *task[1:])
+
+    return again
 
 
 class NearStretch(NamedTuple):
@@ -523,8 +581,15 @@ def find_crossings_by_block(
     blocks = spatial_blocks(boxes, pieces, checked, per_block)
     touches = touches if touches is not None else input_touches(spool)
     found: set[int] = set()
-    tasks = _block_tasks(blocks, spool, ladder, list(steps), cache)
-    checks = map_ordered(executor, block_contacts, tasks, weight=_task_bytes, budget=BLOCK_TASK_BUDGET_BYTES)
+    tasks = _block_tasks(blocks, spool, ladder, list(steps), cache, sliced=executor is not None)
+    checks = map_ordered(
+        executor,
+        block_contacts,
+        tasks,
+        weight=_task_bytes,
+        budget=BLOCK_TASK_BUDGET_BYTES,
+        refetch=_with_surfaces(spool),
+    )
     for block, pairs in zip(blocks, checks, strict=True):
         # Two stretches of one contour meet where they join (the input touch test would say so too).
         met = {(int(block.near[a]), int(block.near[b])) for a, b in pairs} - {(i, i) for i in block.near.tolist()}

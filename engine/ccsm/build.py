@@ -34,7 +34,7 @@ from engine.geom.polyline import ring_areas
 from engine.heap import keep_big_buffers_out_of_the_heap, release_free_memory
 from engine.parallel import local_pool, map_ordered
 from engine.params import BuildParams
-from engine.payloads import opened, pickled
+from engine.payloads import FileSlice, opened, pickled
 from engine.tolerances import MIN_VISIBLE_RING_SIDE_M
 from engine.types import BadFeature, Contour, ContourSet, ContourSubset, contour_payloads
 
@@ -83,11 +83,14 @@ class BuiltSet:
         """How many surfaces (as :attr:`SpooledSet.count`)."""
         return len(self.surfaces)
 
-    def payloads_in_batches(self, size: int) -> Iterator[tuple[list[CCS], list[Contour]]]:
+    def payloads_in_batches(self, size: int, *, sliced: bool = False) -> Iterator[tuple[list[CCS], list[Contour]]]:
         """The surfaces in input order with their input contours, ``size`` at a time (as
-        :meth:`SpooledSet.payloads_in_batches`; a surface in memory is its own payload)."""
+        :meth:`SpooledSet.payloads_in_batches`; a surface in memory is its own payload, never sliced)."""
         for i in range(0, len(self.surfaces), size):
             yield self.surfaces[i : i + size], list(self.inputs[i : i + size])
+
+    def stop_slices(self) -> None:
+        """As :meth:`SpooledSet.stop_slices` (a set in memory gives no slices)."""
 
 
 def vanish_scale(ccs: CCS, model: ScaleModel) -> float:
@@ -223,13 +226,22 @@ class SpooledSet:
     interval: float | None
     repaired: int
 
-    def payloads_in_batches(self, size: int) -> Iterator[tuple[Sequence[CCS | bytes], list[Contour | bytes]]]:
+    def payloads_in_batches(
+        self, size: int, *, sliced: bool = False
+    ) -> Iterator[tuple[Sequence[CCS | bytes | FileSlice], list[Contour | bytes]]]:
         """The surfaces in input order as the spool keeps them (:meth:`Spool.get_payloads`, sent to a worker
         without this process opening them) with their input contours, ``size`` at a time (only one batch of
-        each is read into memory)."""
+        each is read into memory). ``sliced``: where the spool can, only where the surfaces lie in its file
+        (:meth:`Spool.get_slices`), for a worker to read them itself."""
         for start in range(0, self.count, size):
             stop = min(self.count, start + size)
-            yield self.spool.get_payloads(range(start, stop)), contour_payloads(self.inputs, range(start, stop))
+            slices = self.spool.get_slices(range(start, stop)) if sliced else None
+            surfaces = self.spool.get_payloads(range(start, stop)) if slices is None else slices
+            yield surfaces, contour_payloads(self.inputs, range(start, stop))
+
+    def stop_slices(self) -> None:
+        """Send the surfaces themselves from now on: a worker could not read the spool's file."""
+        self.spool.stop_slices()
 
 
 def build_contour_set(

@@ -15,7 +15,7 @@ from collections.abc import Iterable, Sequence
 from typing import Protocol
 
 from engine.ccsm.ccs import CCS
-from engine.payloads import opened
+from engine.payloads import FileSlice, opened
 
 
 class Spool(Protocol):
@@ -39,6 +39,13 @@ class Spool(Protocol):
 
     def put_payloads(self, items: Iterable[tuple[int, CCS | bytes]]) -> None:
         """Keep several (number, surface) in the form the spool keeps them (see :attr:`keeps_pickles`)."""
+
+    def get_slices(self, indices: Sequence[int]) -> list[FileSlice] | None:
+        """Where the surfaces ``indices`` lie in the spool's file, for a worker to read them itself; None when
+        they are in no file, or after :meth:`stop_slices`."""
+
+    def stop_slices(self) -> None:
+        """From now on :meth:`get_slices` gives None: a worker could not read the file (another machine)."""
 
     def close(self) -> None:
         """Free what the spool holds."""
@@ -66,6 +73,12 @@ class MemorySpool:
 
     def put_payloads(self, items: Iterable[tuple[int, CCS | bytes]]) -> None:  # noqa: D102
         self._surfaces.update((i, surface_of(p)) for i, p in items)
+
+    def get_slices(self, indices: Sequence[int]) -> None:  # noqa: D102
+        return None
+
+    def stop_slices(self) -> None:  # noqa: D102
+        pass
 
     def close(self) -> None:  # noqa: D102
         self._surfaces.clear()

@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 
 import engine.scratch as scratch
 from engine.errors import StoreError
+from engine.payloads import FileUnreachable, fetched
 from engine.scratch import SCRATCH_PREFIX, DiskSpool, host_name, remove_stale_scratch
 
 # Batches of (number, bytes) as a build puts them: chunks in order, then the repair's rebuilds out of order.
@@ -49,6 +50,46 @@ def test_each_number_gives_the_last_bytes_put_under_it(
         finally:
             spool.close()
     assert not spool.path.exists()
+
+
+@settings(deadline=None, max_examples=60)
+@given(puts=batches)
+def test_a_worker_reads_from_a_slice_the_bytes_put_when_it_was_given(
+    puts: list[list[tuple[int, bytes]]], tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    # What a block's or a shard's task is sent instead of the bytes: where they lie. A number put again later
+    # lies elsewhere; the slice given before still reads the bytes it was given for.
+    spool = DiskSpool(tmp_path_factory.mktemp("slices"))
+    given_then: list[tuple[object, bytes]] = []
+    try:
+        for batch in puts:
+            spool.put_payloads(batch)
+            kept = sorted({i for i, _ in batch})
+            if kept:
+                slices = spool.get_slices(kept)
+                assert slices is not None
+                given_then.extend(zip(slices, spool.get_payloads(kept), strict=True))
+        assert fetched([slice_ for slice_, _ in given_then]) == [blob for _, blob in given_then]
+        assert fetched([b"as it is", *[slice_ for slice_, _ in given_then[:1]]])[0] == b"as it is"
+        spool.stop_slices()
+        assert spool.get_slices(sorted({i for batch in puts for i, _ in batch})) is None
+    finally:
+        spool.close()
+
+
+def test_a_worker_that_cannot_read_the_spool_says_so(tmp_path: Path) -> None:
+    spool = DiskSpool(tmp_path)
+    spool.put_payloads([(0, b"x" * 100)])
+    (where,) = spool.get_slices([0]) or []
+    with pytest.raises(KeyError, match=r"not in the spool: \[1\]"):
+        spool.get_slices([0, 1])
+    short = tmp_path / "short.spool"
+    short.write_bytes(b"x" * 50)  # another machine's file of that name: shorter than the slice
+    with pytest.raises(FileUnreachable, match="50 of 100 bytes"):
+        fetched([where._replace(path=str(short))])
+    spool.close()  # the build process's file is gone (or on another machine)
+    with pytest.raises(FileUnreachable, match="No such file"):
+        fetched([where])
 
 
 def test_surfaces_put_as_objects_come_back_equal(tmp_path: Path) -> None:

@@ -185,6 +185,42 @@ def test_rows_and_label_candidates_made_on_an_executor_are_stored_as_made_in_the
     assert theirs.anchors.text == mine.anchors.text
 
 
+@pytest.mark.parametrize("unreadable_by", ["block", "shard"])
+def test_a_build_whose_workers_cannot_read_its_files_sends_them_the_data_and_stores_the_same_rows(
+    tmp_path, monkeypatch, unreadable_by: str
+) -> None:
+    # A cluster on other machines: no worker can read the spool's file (nor open the store). The first task
+    # sent with only where its surfaces lie (a block's check, or a shard's rows when the blocks' reads are let
+    # through) comes back unread and goes again with them, and so do the tasks after it; the rows are the same.
+    import engine.store.shard as shard
+    from engine.payloads import FileSlice, FileUnreachable
+
+    z = fractal_heights(11, 3.0, n=64, relief_m=200.0).astype(np.float32)
+    dem = write_geotiff(tmp_path / "t.tif", z, west=740_000.0, north=4_060_000.0, cell=30.0, crs="EPSG:32616")
+    spec = SourceSpec(dem, "t", "t", interval=10.0)
+    here = CCSStore(tmp_path / "here.sqlite")
+    build_dataset(here, spec, workers=1)
+    build_thread = threading.get_ident()
+    unread: list[str] = []
+    real_fetched = datasets.fetched
+
+    def on_another_machine(items):  # noqa: ANN001, ANN202 - fetched's
+        if threading.get_ident() != build_thread and any(isinstance(i, FileSlice) for i in items):
+            unread.append(unreadable_by)
+            raise FileUnreachable("no such file on this worker")
+        return real_fetched(items)
+
+    monkeypatch.setattr(blocks if unreadable_by == "block" else datasets, "fetched", on_another_machine)
+    monkeypatch.setattr(shard, "_holds_reservation", lambda target: False)  # nor the store
+    remote = CCSStore(tmp_path / "remote.sqlite")
+    with ThreadPoolExecutor(2) as pool:
+        executor = RecordingExecutor(pool)
+        build_dataset(remote, spec, executor=executor)
+    assert stored_rows(remote, "t") == stored_rows(here, "t")
+    assert unread, "no task was sent only where its surfaces lie"
+    assert executor.ran.count("batch_shard") > 1 and executor.ran.count("block_contacts") > 1, executor.ran
+
+
 class RecordingPool(RecordingExecutor):
     """A :class:`RecordingExecutor` that shuts its pool down with it, as the build's own pool is."""
 

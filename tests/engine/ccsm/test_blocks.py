@@ -268,3 +268,124 @@ def test_repair_with_the_near_cache_kept_across_checks_makes_the_surfaces_of_one
     for a, b in zip(kept.surfaces, fresh.surfaces, strict=True):
         assert_array_equal(a.base, b.base)
         assert_array_equal(a.top, b.top)
+
+
+def test_block_tasks_for_workers_carry_where_surfaces_lie_and_the_worker_cuts_the_same_stretches(tmp_path) -> None:
+    from dataclasses import replace
+
+    from engine.ccsm.blocks import NearSlice, _block_tasks, near_surfaces
+    from engine.payloads import FileSlice
+    from engine.scratch import DiskSpool
+
+    surfaces = [
+        replace(s, t_at_scale=np.linspace(0.0, 1.0, 5) ** (1 + i % 7), vanish_scale=1e5 + i)
+        for i, s in enumerate(random_lines())
+    ]
+    spool = DiskSpool(tmp_path)
+    spool.put_many(enumerate(surfaces))
+    reads: list[int] = []
+    read = spool.get_payloads
+    spool.get_payloads = lambda indices: reads.extend(indices) or read(indices)  # type: ignore[method-assign]
+    pieces = PieceIndex()
+    pieces.put(range(len(surfaces)), surfaces)
+    found = spatial_blocks(surface_boxes(surfaces), pieces, per_block=8)
+    cut = 0
+    for b, (near, own, *_) in zip(found, _block_tasks(found, spool, np.ones(2), [0], sliced=True), strict=True):
+        assert own == np.flatnonzero(b.own).tolist()
+        opened_there = near_surfaces(near)  # what the worker does with them
+        for k, (i, f, la) in enumerate(zip(b.near.tolist(), b.first.tolist(), b.last.tolist(), strict=True)):
+            s, whole = opened_there[k], surfaces[i]
+            rows = slice(None) if f < 0 else slice(f, la + 1)
+            assert isinstance(near[k], FileSlice if f < 0 else NearSlice)
+            np.testing.assert_array_equal(s.base, whole.base[rows])
+            np.testing.assert_array_equal(s.top, whole.top[rows])
+            np.testing.assert_array_equal(s.t_at_scale, whole.t_at_scale)
+            assert s.vanish_scale == whole.vanish_scale
+            cut += len(s.base) < len(whole.base)
+    assert cut > 0 and reads == []  # the build process read none of the surfaces
+    spool.close()
+
+
+def _disk_spool_of(surfaces: list[CCS], directory) -> object:  # noqa: ANN001 - a path
+    from engine.scratch import DiskSpool
+
+    spool = DiskSpool(directory)
+    spool.put_many(enumerate(surfaces))
+    return spool
+
+
+def test_blocks_checked_on_a_pool_that_reads_the_spool_find_the_contacts_of_one_process(
+    unrepaired: BuiltSet, tmp_path
+) -> None:
+    from engine.parallel import local_pool
+
+    surfaces, ladder = unrepaired.surfaces, unrepaired.model.ladder
+    steps = checked_ladder_steps(unrepaired.model)
+    boxes = surface_boxes(surfaces)
+    pieces = PieceIndex()
+    pieces.put(range(len(surfaces)), surfaces)
+    here = find_crossings_by_block(_disk_spool_of(surfaces, tmp_path), boxes, pieces, ladder, steps, per_block=4)
+    assert len(here) > 10
+    spool = _disk_spool_of(surfaces, tmp_path)
+    # The build process reads a surface only for the input's touch test of a pair found (its base rows).
+    reading_bases, read_bases, read_payloads = [False], spool.get, spool.get_payloads
+
+    def bases(indices):  # noqa: ANN001, ANN202 - the spool's
+        reading_bases[0] = True
+        try:
+            return read_bases(indices)
+        finally:
+            reading_bases[0] = False
+
+    def payloads(indices):  # noqa: ANN001, ANN202 - the spool's
+        assert reading_bases[0], "a block's surfaces were read in the build process"
+        return read_payloads(indices)
+
+    spool.get, spool.get_payloads = bases, payloads
+    with local_pool(2) as pool:
+        assert find_crossings_by_block(spool, boxes, pieces, ladder, steps, executor=pool, per_block=4) == here
+
+
+def test_blocks_whose_workers_cannot_read_the_spool_are_sent_again_with_their_surfaces(
+    unrepaired: BuiltSet, tmp_path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import threading
+    from concurrent.futures import Executor, ThreadPoolExecutor
+
+    from engine.ccsm.blocks import NearSlice
+    from engine.payloads import FileSlice, FileUnreachable
+
+    surfaces, ladder = unrepaired.surfaces, unrepaired.model.ladder
+    steps = checked_ladder_steps(unrepaired.model)
+    boxes = surface_boxes(surfaces)
+    pieces = PieceIndex()
+    pieces.put(range(len(surfaces)), surfaces)
+    here = find_crossings_by_block(_disk_spool_of(surfaces, tmp_path), boxes, pieces, ladder, steps, per_block=4)
+    build_process, real_fetched = threading.get_ident(), blocks.fetched
+
+    def on_another_machine(items):  # noqa: ANN001, ANN202 - fetched's
+        if threading.get_ident() != build_process and any(isinstance(i, FileSlice) for i in items):
+            raise FileUnreachable("no such file on this worker")
+        return real_fetched(items)
+
+    monkeypatch.setattr(blocks, "fetched", on_another_machine)
+    sent: list[str] = []
+
+    class Recording(Executor):
+        def __init__(self, inner: Executor) -> None:
+            self.inner = inner
+
+        def submit(self, fn, /, *args, **kwargs):  # noqa: ANN001, ANN002, ANN003, ANN201 - Executor's
+            sliced = any(isinstance(item, (FileSlice, NearSlice)) for item in args[0])
+            sent.append("where they lie" if sliced else "surfaces")
+            return self.inner.submit(fn, *args, **kwargs)
+
+    spool = _disk_spool_of(surfaces, tmp_path)
+    with ThreadPoolExecutor(2) as pool:
+        found = find_crossings_by_block(spool, boxes, pieces, ladder, steps, executor=Recording(pool), per_block=4)
+    assert found == here
+    # The first tasks went as slices and came back unread; each went again with its surfaces, and from then on
+    # every task carried its surfaces.
+    assert sent[0] == "where they lie" and sent[-1] == "surfaces"
+    assert "where they lie" not in sent[sent.index("surfaces") :][sent.count("where they lie") :]
+    assert spool.get_slices([0]) is None
