@@ -9,16 +9,31 @@ the result.
 
 from __future__ import annotations
 
+import os
 from concurrent.futures import Executor
 from dataclasses import replace
+from functools import partial
+from typing import Any, NamedTuple
 
 import numpy as np
+from numpy.typing import NDArray
 
-from engine.cartography.dataset import dataset_cartography, is_labelled, label_sources
-from engine.cartography.labels import orient_angle, place_labels
+from engine.cartography.dataset import DatasetCartography, dataset_cartography, is_labelled, label_sources
+from engine.cartography.labels import (
+    CANDIDATE_BATCH,
+    Candidates,
+    LabelStyle,
+    batch_candidates,
+    orient_angle,
+    place_among,
+    place_labels,
+)
 from engine.cartography.neighbour_uphill import PROBE_M, top_uphill
+from engine.errors import StoreError
 from engine.intervals import infer_interval
-from engine.store.records import LabelAnchors, LabelPlacer, StoredLabels
+from engine.parallel import map_ordered
+from engine.payloads import FileUnreachable
+from engine.store.records import ContourRecord, LabelAnchors, LabelPlacer, StoredLabels
 from engine.store.store import CCSStore
 
 #: The largest tile zoom served unless configured otherwise; builds place labels for it.
@@ -50,13 +65,91 @@ def place_dataset_labels(
     # Only the labelled contours' rows are read (an index contour in five, at the default interval), a batch at
     # a time: placing keeps each one's candidates, not its rows.
     fids = fid[is_labelled(carto, elevation)].tolist()
-    batches = (store.load(fids[k : k + LABEL_BATCH]) for k in range(0, len(fids), LABEL_BATCH))
-    sources = (src for records in batches for src in label_sources(carto, records))
     last_zoom = label_last_zoom(max_zoom)
-    anchors = place_labels(sources, info.ladder, carto.latitude, last_zoom, executor=executor)
+    if executor is None:
+        batches = (store.load(fids[k : k + LABEL_BATCH]) for k in range(0, len(fids), LABEL_BATCH))
+        sources = (src for records in batches for src in label_sources(carto, records))
+        anchors = place_labels(sources, info.ladder, carto.latitude, last_zoom)
+    else:
+        # The workers read the labelled contours' rows from the store themselves, as they wrote them: this
+        # process only places the labels among the candidates that come back.
+        style = LabelStyle()
+        rows = StoredRows(str(store.path.resolve()), store.rows_id(dataset))
+        tasks = (
+            (rows, fids[k : k + CANDIDATE_BATCH], carto, info.ladder, last_zoom, style)
+            for k in range(0, len(fids), CANDIDATE_BATCH)
+        )
+        found = map_ordered(executor, stored_candidates, tasks, refetch=partial(_with_rows, store))
+        anchors = place_among((pair for batch in found for pair in batch), style)
     if carto.options.label_orientation == "uphill" and carto.uphill_side is None:
         anchors = uphill_from_neighbours(store, dataset, anchors)  # placed upright: the source gives no side
     return StoredLabels(info.data_version, last_zoom, anchors)
+
+
+class StoredRows(NamedTuple):
+    """Where a dataset's rows are, for a worker to read them itself: the store file and the rows' id."""
+
+    path: str
+    rows_id: str
+
+
+class LabelHead(NamedTuple):
+    """What the placement reads of a labelled contour besides its candidates (``cartography.labels.LabelHead``)."""
+
+    fid: int
+    elevation: float
+    text: str
+    rank: int
+
+
+#: The store files this process has opened to read label sources from, by path (a worker reads many batches).
+_READING: dict[str, CCSStore] = {}
+
+
+def stored_candidates(
+    rows: StoredRows | list[ContourRecord],
+    fids: list[int],
+    carto: DatasetCartography,
+    ladder: NDArray[np.float64],
+    max_zoom: float,
+    style: LabelStyle,
+) -> list[tuple[LabelHead, Candidates | str]]:
+    """A task of a worker: the labelled contours ``fids`` read from the store (``rows``: where; or the rows
+    themselves, read by the build process) and their label candidates, each with what the placement reads of
+    it.
+
+    Raises
+    ------
+    FileUnreachable
+        This worker cannot read those rows there (another machine): the task goes again with the rows.
+    """
+    records = _stored_records(rows, fids) if isinstance(rows, StoredRows) else rows
+    sources = label_sources(carto, records)
+    found = batch_candidates(sources, ladder, carto.latitude, max_zoom, style)
+    return [(LabelHead(s.fid, s.elevation, s.text, s.rank), cands) for s, cands in zip(sources, found, strict=True)]
+
+
+def _stored_records(rows: StoredRows, fids: list[int]) -> list[ContourRecord]:
+    """The rows ``fids`` of ``rows`` read from its store file, all of them, or FileUnreachable."""
+    records: list[ContourRecord] = []
+    for fresh in (False, True):  # a file kept open from an earlier build may have been replaced since
+        store = None if fresh else _READING.get(rows.path)
+        try:
+            if store is None:
+                if not os.path.isfile(rows.path):
+                    raise FileUnreachable(f"{rows.path}: no such file")
+                store = _READING[rows.path] = CCSStore(rows.path, readonly=True)
+            records = store.load(fids, rows.rows_id)
+        except StoreError as exc:  # not a store: another file of that name
+            raise FileUnreachable(f"{rows.path}: {exc}") from exc
+        if len(records) == len(fids):
+            return records
+    raise FileUnreachable(f"{rows.path}: {len(fids) - len(records)} of the rows asked are not there")
+
+
+def _with_rows(store: CCSStore, task: tuple[Any, ...]) -> tuple[Any, ...]:
+    """A label task sent again when its worker cannot read the store: with the rows read here."""
+    return (store.load(task[1]), *task[1:])
 
 
 #: Labels whose neighbouring contours are read from the store at a time (near one another: sorted by cell).

@@ -20,6 +20,7 @@ from collections.abc import Iterable, Iterator, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass
 from itertools import islice
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -321,9 +322,19 @@ def place_labels(
         :mod:`engine.parallel`); None = in this process. The placement among them runs here.
     """
     style = style or LabelStyle()
-    pts, ang, score, zoom, owner = [], [], [], [], []
-    fids, elevations, ranks, labels = [], [], [], []  # of each source
-    issues: list[tuple[int, str]] = []
+    return place_among(found_candidates(sources, ladder, latitude, max_zoom, style, executor), style)
+
+
+def found_candidates(
+    sources: Iterable[LabelSource],
+    ladder: NDArray[np.float64],
+    latitude: float,
+    max_zoom: float,
+    style: LabelStyle,
+    executor: Executor | None = None,
+) -> Iterator[tuple[LabelSource, Candidates | str]]:
+    """Each source with its candidates (or why it has none), found :data:`CANDIDATE_BATCH` sources a task on
+    ``executor`` (None: here), in the sources' order."""
     sent: deque[list[LabelSource]] = deque()  # the batches whose candidates are being found, in order
 
     def tasks() -> Iterator[tuple[object, ...]]:
@@ -332,11 +343,29 @@ def place_labels(
             sent.append(batch)
             yield batch, ladder, latitude, max_zoom, style
 
-    found = (
-        (src, cands)
-        for batch_found in map_ordered(executor, batch_candidates, tasks())
-        for src, cands in zip(sent.popleft(), batch_found, strict=True)
-    )
+    for batch_found in map_ordered(executor, batch_candidates, tasks()):
+        yield from zip(sent.popleft(), batch_found, strict=True)
+
+
+class LabelHead(Protocol):
+    """What the placement reads of a labelled contour besides its candidates (a :class:`LabelSource` is one)."""
+
+    @property
+    def fid(self) -> int: ...  # noqa: D102
+    @property
+    def elevation(self) -> float: ...  # noqa: D102
+    @property
+    def text(self) -> str: ...  # noqa: D102
+    @property
+    def rank(self) -> int: ...  # noqa: D102
+
+
+def place_among(found: Iterable[tuple[LabelHead, Candidates | str]], style: LabelStyle) -> LabelAnchors:
+    """The anchors placed among each labelled contour's candidates (:func:`place_labels`): a walk over them in
+    order of first zoom that keeps a label only where it overlaps no label kept before it."""
+    pts, ang, score, zoom, owner = [], [], [], [], []
+    fids, elevations, ranks, labels = [], [], [], []  # of each source
+    issues: list[tuple[int, str]] = []
     for k, (src, cands) in enumerate(found):
         if isinstance(cands, str):
             issues.append((src.fid, cands))

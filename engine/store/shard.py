@@ -170,12 +170,15 @@ _OPENED: dict[str, StoreFile] = {}
 def merge_on_worker(target: StageTarget, shard: Shard, offset: int) -> Shard | MergedShard:
     """On a worker: ``shard`` merged into the target's store file when this process can open it and it holds
     the target's reservation (:class:`MergedShard`), else the shard itself, for the build process to merge."""
-    store = _OPENED.get(target.path)
-    if store is None:
-        if not _holds_reservation(target):  # no file there, or another one: never create or touch it
-            return shard
-        store = _OPENED[target.path] = StoreFile(target.path)
-    return MergedShard(shard.tally) if merge_shard(store, target, shard, offset) else shard
+    for fresh in (False, True):  # a file kept open from an earlier build may have been replaced since
+        store = None if fresh else _OPENED.get(target.path)
+        if store is None:
+            if not _holds_reservation(target):  # no file there, or another one: never create or touch it
+                return shard
+            store = _OPENED[target.path] = StoreFile(target.path)
+        if merge_shard(store, target, shard, offset):
+            return MergedShard(shard.tally)
+    return shard
 
 
 def _holds_reservation(target: StageTarget) -> bool:

@@ -241,6 +241,11 @@ class CCSStore(BuildBook):
         row = self._con().execute("SELECT rows_id FROM datasets WHERE id=?", (dataset,)).fetchone()
         return None if row is None else str(row[0])
 
+    def rows_id(self, dataset: str) -> str:
+        """The id a dataset's contour rows are stored under (a staged build's dataset row is its own; an
+        unknown dataset's own id, under which no row is stored): what :meth:`load` takes to read only its rows."""
+        return self._rows_of(dataset)
+
     def _rows_of(self, dataset: str) -> str:
         """The id to read a dataset's rows by: its row id (a staged build's dataset row is its own); an unknown
         dataset's own id, under which no row is stored."""
@@ -375,18 +380,24 @@ class CCSStore(BuildBook):
         )
         return np.array([r[0] for r in rows], dtype=np.float64)
 
-    def load(self, fids: Sequence[int]) -> list[ContourRecord]:
-        """Decode contour rows by fid (in the order given; unknown fids are skipped)."""
-        return self._contours_by_fid(CONTOUR_COLUMNS, contour_record, fids)
+    def load(self, fids: Sequence[int], rows_id: str | None = None) -> list[ContourRecord]:
+        """Decode contour rows by fid (in the order given; unknown fids are skipped, and with ``rows_id``
+        (:meth:`rows_id`) those stored under another id)."""
+        return self._contours_by_fid(CONTOUR_COLUMNS, contour_record, fids, rows_id)
 
-    def _contours_by_fid(self, columns: str, decode: Callable[[Any], T], fids: Sequence[int]) -> list[T]:
+    def _contours_by_fid(
+        self, columns: str, decode: Callable[[Any], T], fids: Sequence[int], rows_id: str | None = None
+    ) -> list[T]:
         """``decode`` of the ``columns`` (fid first) of each contour row by fid, in the order given (unknown fids
-        are skipped); asked 500 fids at a time, below SQLite's limit on bound parameters."""
+        are skipped, and with ``rows_id`` those of other rows); asked 500 fids at a time, below SQLite's limit on
+        bound parameters."""
         out: dict[int, T] = {}
         con = self._con()
+        ours = "" if rows_id is None else " AND dataset = ?"
         for i in range(0, len(fids), 500):
             chunk = list(fids[i : i + 500])
             marks = ",".join("?" * len(chunk))
-            for r in con.execute(f"SELECT {columns} FROM contours WHERE fid IN ({marks})", chunk):
+            args = chunk if rows_id is None else [*chunk, rows_id]
+            for r in con.execute(f"SELECT {columns} FROM contours WHERE fid IN ({marks}){ours}", args):
                 out[r[0]] = decode(r)
         return [out[f] for f in fids if f in out]

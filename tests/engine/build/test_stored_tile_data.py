@@ -72,14 +72,19 @@ def test_stored_labels_are_those_placed_from_the_stored_contours(sample_store: P
 
 
 def count_placements(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """Every placement of a dataset's labels, counted: the walk among the candidates that each one ends in,
+    whether their candidates were found here or by workers reading the store."""
+    import engine.cartography.labels as cartography_labels
+
     calls: list[int] = []
-    real = build_labels.place_labels
+    real = cartography_labels.place_among
 
     def counted(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
         calls.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(build_labels, "place_labels", counted)
+    monkeypatch.setattr(cartography_labels, "place_among", counted)
+    monkeypatch.setattr(build_labels, "place_among", counted)
     return calls
 
 

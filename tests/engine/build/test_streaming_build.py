@@ -16,6 +16,7 @@ from numpy.testing import assert_array_equal
 from synthetic_rasters import fractal_heights, write_geotiff
 
 import engine.build.datasets as datasets
+import engine.build.labels as build_labels
 import engine.ccsm.blocks as blocks
 from engine.build.datasets import SourceSpec, build_dataset
 from engine.ccsm.build import build_contour_set, build_into
@@ -168,12 +169,19 @@ def test_rows_and_label_candidates_made_on_an_executor_are_stored_as_made_in_the
         merge_run(*args)  # type: ignore[arg-type]
 
     monkeypatch.setattr(shard, "merge_run", on_workers_only)
+    load = CCSStore.load
+
+    def loaded_on_workers_only(self, *args):  # noqa: ANN001, ANN002, ANN202 - CCSStore.load's
+        assert os.getpid() != build_process, "contour rows were read in the build process"
+        return load(self, *args)
+
+    monkeypatch.setattr(CCSStore, "load", loaded_on_workers_only)  # the labels' rows are read by the workers
     with local_pool(2) as pool:
         executor = RecordingExecutor(pool)
         build_dataset(pooled, spec, executor=executor)
     # The worker processes made the rows, merged them into the store and found the labels' candidates, several
     # tasks of each; the rows take the fids after the earlier dataset's, in input order.
-    assert executor.ran.count("batch_shard") > 1 and executor.ran.count("batch_candidates") > 1, executor.ran
+    assert executor.ran.count("batch_shard") > 1 and executor.ran.count("stored_candidates") > 1, executor.ran
     assert stored_rows(pooled, "t") == stored_rows(here, "t")
     assert pooled.all_fids("t")[0] == pooled.all_fids("earlier")[-1] + 1
     mine, theirs = here.labels("t"), pooled.labels("t")
@@ -185,7 +193,7 @@ def test_rows_and_label_candidates_made_on_an_executor_are_stored_as_made_in_the
     assert theirs.anchors.text == mine.anchors.text
 
 
-@pytest.mark.parametrize("unreadable_by", ["block", "shard"])
+@pytest.mark.parametrize("unreadable_by", ["block", "shard", "label"])
 def test_a_build_whose_workers_cannot_read_its_files_sends_them_the_data_and_stores_the_same_rows(
     tmp_path, monkeypatch, unreadable_by: str
 ) -> None:
@@ -210,15 +218,35 @@ def test_a_build_whose_workers_cannot_read_its_files_sends_them_the_data_and_sto
             raise FileUnreachable("no such file on this worker")
         return real_fetched(items)
 
-    monkeypatch.setattr(blocks if unreadable_by == "block" else datasets, "fetched", on_another_machine)
+    def rows_on_another_machine(rows, fids):  # noqa: ANN001, ANN202 - _stored_records'
+        if threading.get_ident() != build_thread:
+            unread.append(unreadable_by)
+            raise FileUnreachable("no such file on this worker")
+        return read_rows(rows, fids)
+
+    if unreadable_by == "label":
+        read_rows = build_labels._stored_records
+        monkeypatch.setattr(build_labels, "_stored_records", rows_on_another_machine)
+    else:
+        monkeypatch.setattr(blocks if unreadable_by == "block" else datasets, "fetched", on_another_machine)
     monkeypatch.setattr(shard, "_holds_reservation", lambda target: False)  # nor the store
     remote = CCSStore(tmp_path / "remote.sqlite")
     with ThreadPoolExecutor(2) as pool:
         executor = RecordingExecutor(pool)
         build_dataset(remote, spec, executor=executor)
     assert stored_rows(remote, "t") == stored_rows(here, "t")
-    assert unread, "no task was sent only where its surfaces lie"
+    assert _labels_of(remote, "t") == _labels_of(here, "t")
+    assert unread, "no task was sent only where its data lies"
     assert executor.ran.count("batch_shard") > 1 and executor.ran.count("block_contacts") > 1, executor.ran
+
+
+def _labels_of(store: CCSStore, dataset: str) -> list[tuple]:
+    """The dataset's label anchors, one tuple each, with fids counted from the dataset's first."""
+    labels = store.labels(dataset)
+    assert labels is not None and len(labels.anchors) > 0, "no labels placed"
+    a, first = labels.anchors, store.all_fids(dataset)[0]
+    columns = zip(a.xy.tolist(), a.angle.tolist(), a.min_zoom.tolist(), (a.fid - first).tolist(), a.text, strict=True)
+    return list(columns)
 
 
 class RecordingPool(RecordingExecutor):
@@ -255,9 +283,9 @@ def test_a_local_build_makes_its_rows_and_label_candidates_on_its_own_pool(
     assert len(pools) == 1, "one pool for the whole build"
     ran = pools[0].ran
     assert ran.count("_build_kept_chunk") > 1, ran
-    assert ran.count("batch_shard") >= 1 and ran.count("batch_candidates") >= 1, ran
+    assert ran.count("batch_shard") >= 1 and ran.count("stored_candidates") >= 1, ran
     if source == "dem":
-        assert ran.count("batch_shard") > 1 and ran.count("batch_candidates") > 1, ran
+        assert ran.count("batch_shard") > 1 and ran.count("stored_candidates") > 1, ran
     # A DEM read whole is traced on the pool, a run of levels a task; a contour file is read here.
     assert (ran.count("trace_grid_levels") > 1) == (source == "dem"), ran
 
@@ -361,3 +389,37 @@ def test_a_scratch_file_that_cannot_be_made_is_a_clear_store_error(tmp_path) -> 
     finally:
         if locked.is_dir():
             locked.chmod(0o700)
+
+
+def test_label_candidates_read_by_a_worker_from_the_store_are_those_of_the_rows_sent(tmp_path) -> None:
+    from engine.build.labels import StoredRows, stored_candidates
+    from engine.cartography.dataset import dataset_cartography
+    from engine.cartography.labels import LabelStyle
+    from engine.payloads import FileUnreachable
+
+    z = fractal_heights(11, 3.0, n=64, relief_m=200.0).astype(np.float32)
+    dem = write_geotiff(tmp_path / "t.tif", z, west=740_000.0, north=4_060_000.0, cell=30.0, crs="EPSG:32616")
+    store = CCSStore(tmp_path / "s.sqlite")
+    info, _ = build_dataset(store, SourceSpec(dem, "t", "t", interval=10.0), workers=1)
+    fids = store.all_fids("t")
+    elevations = np.unique([r.elevation for r in store.load(fids)])
+    carto = dataset_cartography(info, 10.0, elevations)
+    task = (fids, carto, info.ladder, 17.0, LabelStyle())
+    sent = stored_candidates(store.load(fids), *task)
+    read = stored_candidates(StoredRows(str(store.path), store.rows_id("t")), *task)
+    assert len(sent) > 3 and [head for head, _ in read] == [head for head, _ in sent]
+    for (_, a), (_, b) in zip(read, sent, strict=True):
+        assert not isinstance(a, str) and not isinstance(b, str)
+        for column_a, column_b in zip(a, b, strict=True):
+            assert_array_equal(column_a, column_b)
+    # Another machine: no file there, another store there, or another file.
+    other = CCSStore(tmp_path / "other.sqlite")
+    (tmp_path / "text.sqlite").write_text("not a store")
+    for rows in (
+        StoredRows(str(tmp_path / "nowhere.sqlite"), store.rows_id("t")),
+        StoredRows(str(other.path), store.rows_id("t")),
+        StoredRows(str(tmp_path / "text.sqlite"), store.rows_id("t")),
+        StoredRows(str(store.path), "another dataset's rows"),
+    ):
+        with pytest.raises(FileUnreachable):
+            stored_candidates(rows, *task)
