@@ -25,6 +25,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from engine.cartography.label_grid import kept_apart
 from engine.ccsm.regression import t_at_scales
 from engine.errors import short_reason
 from engine.parallel import map_ordered
@@ -239,32 +240,25 @@ def _keep_apart(
     against the few kept labels in the 3 x 3 cells around it rather than all of them (a dataset with a hundred
     thousand index-contour labels is placed in seconds, not the hour the test against every kept label took),
     and the grid is refiled at half the width whenever the distance halves. The decisions are those of the
-    test against every kept label: only labels that cannot meet are skipped.
+    test against every kept label (:func:`boxes_overlap`): only labels that cannot meet are skipped.
+
+    The walk is compiled (:func:`~engine.cartography.label_grid.kept_apart`): it is the one part of a build's
+    labels that runs in the build process, serially, and in Python it took 0.9 s of that process's 14 CPU s on
+    the 16x terrain.
     """
     if not len(order):
         return []
-    biggest = float(box.max())
-    kept: list[int] = []
-    cell = math.inf
-    grid: dict[tuple[int, int], list[int]] = {}
-
-    def file(i: int) -> None:
-        key = (int(math.floor(xy[i, 0] / cell)), int(math.floor(xy[i, 1] / cell)))
-        grid.setdefault(key, []).append(i)
-
-    for j in order.tolist():
-        reach = biggest * float(metres_per_px(zoom[j]))
-        if reach < cell / 2 or not math.isfinite(cell):
-            cell = max(reach, 1e-9)
-            grid = {}
-            for i in kept:
-                file(i)
-        cx, cy = int(math.floor(xy[j, 0] / cell)), int(math.floor(xy[j, 1] / cell))
-        near = [i for dx in (-1, 0, 1) for dy in (-1, 0, 1) for i in grid.get((cx + dx, cy + dy), ())]
-        if not near or not boxes_overlap(xy, box, zoom, j, np.array(near, dtype=np.intp)).any():
-            kept.append(j)
-            file(j)
-    return kept
+    # Metres per pixel at the later of two first zooms is the smaller of the two labels' own (it falls as the
+    # zoom grows): the same numbers boxes_overlap computes from the larger zoom.
+    mpp = np.asarray(metres_per_px(zoom), dtype=np.float64)
+    kept = kept_apart(
+        np.ascontiguousarray(xy, dtype=np.float64),
+        np.ascontiguousarray(box, dtype=np.float64),
+        mpp,
+        np.asarray(order, dtype=np.int64),
+        float(box.max()),
+    )
+    return [int(i) for i in kept]
 
 
 #: (k, 2) points, (k,) angles, (k,) straightness and (k,) first zooms: one contour's candidate anchors.

@@ -153,17 +153,8 @@ def test_integer_columns_and_points_encode_as_the_reference_decodes_them():
     assert not math.isnan(labels[0]["properties"]["angle"])
 
 
-def test_label_placement_by_grid_keeps_exactly_the_labels_a_test_against_every_kept_label_keeps():
-    """Issue 12: placement files kept labels in a grid instead of testing each against all (quadratic, an hour on
-    a big dataset); the labels kept must be the same. The reference below tests every kept label."""
-    from engine.cartography.labels import _keep_apart
-
-    rng = np.random.default_rng(3)
-    n = 3_000
-    xy = rng.uniform(0, 200_000, (n, 2))
-    box = np.column_stack([rng.uniform(30, 160, n), rng.uniform(14, 40, n)])
-    zoom = np.round(rng.uniform(7, 15, n), 1)  # ties on purpose
-    order = np.lexsort((rng.uniform(size=n), zoom))
+def _kept_by_testing_every_kept_label(xy, box, zoom, order) -> list[int]:  # noqa: ANN001 - arrays
+    """The reference: each label in ``order`` tested against every label kept before it."""
     reference: list[int] = []
     for j in order.tolist():
         if reference:
@@ -172,9 +163,50 @@ def test_label_placement_by_grid_keeps_exactly_the_labels_a_test_against_every_k
             if (np.abs(xy[k] - xy[j]) < half).all(axis=1).any():
                 continue
         reference.append(j)
+    return reference
+
+
+def test_label_placement_by_grid_keeps_exactly_the_labels_a_test_against_every_kept_label_keeps():
+    """Issue 12: placement files kept labels in a grid instead of testing each against all (quadratic, an hour on
+    a big dataset); the labels kept must be the same. The reference tests every kept label."""
+    from engine.cartography.labels import _keep_apart
+
+    rng = np.random.default_rng(3)
+    n = 3_000
+    xy = rng.uniform(0, 200_000, (n, 2))
+    box = np.column_stack([rng.uniform(30, 160, n), rng.uniform(14, 40, n)])
+    zoom = np.round(rng.uniform(7, 15, n), 1)  # ties on purpose
+    order = np.lexsort((rng.uniform(size=n), zoom))
     kept = _keep_apart(xy, box, zoom, order)
     assert 200 < len(kept) < n  # some kept, some dropped: the test means something
-    assert kept == reference
+    assert kept == _kept_by_testing_every_kept_label(xy, box, zoom, order)
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    labels=st.lists(
+        st.tuples(
+            st.sampled_from([-2e7, -1e5, -3.0, 0.0, 7.5, 1e3, 4e4, 2e7]) | st.floats(-2e7, 2e7),  # x
+            st.sampled_from([-2e7, -1e5, 0.0, 7.5, 1e3, 4e4]) | st.floats(-2e7, 2e7),  # y
+            st.floats(1.0, 400.0),  # box width, px
+            st.floats(1.0, 80.0),  # box height, px
+            st.sampled_from([0.0, 5.0, 12.0, 12.5, 16.0]) | st.floats(0.0, 22.0),  # first zoom
+        ),
+        min_size=1,
+        max_size=120,
+    ),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_the_compiled_placement_keeps_the_labels_every_kept_label_test_keeps(labels, seed) -> None:
+    """The walk is compiled (issue 26: it runs serially in the build process): on labels drawn anywhere on the
+    map, on top of one another, with tied zooms and boxes of any size, it keeps exactly what testing every kept
+    label keeps."""
+    from engine.cartography.labels import _keep_apart
+
+    table = np.array(labels, dtype=np.float64)
+    xy, box, zoom = table[:, :2], table[:, 2:4], table[:, 4]
+    order = np.lexsort((np.random.default_rng(seed).uniform(size=len(table)), zoom))
+    assert _keep_apart(xy, box, zoom, order) == _kept_by_testing_every_kept_label(xy, box, zoom, order)
 
 
 def test_labels_placed_from_sources_read_once_in_a_stream_are_those_placed_from_a_list():
