@@ -91,6 +91,9 @@ class StoreFile:
         Read up to this much of the file through memory mapping (SQLite's ``mmap_size``; 0: SQLite's default,
         none). A serving process reads the stored pieces of a large dataset this way without copying each
         page into its own cache: the mapped pages are the system's shared file cache, not the process's memory.
+    busy_timeout_s
+        How long a write waits for another's lock before :class:`~engine.errors.StoreBusy` (None:
+        :data:`BUSY_TIMEOUT_S`).
 
     Raises
     ------
@@ -98,10 +101,18 @@ class StoreFile:
         The file is not a ccsm store, is of another format, or cannot be opened.
     """
 
-    def __init__(self, path: str | os.PathLike[str], *, readonly: bool = False, mmap_bytes: int = 0) -> None:
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        readonly: bool = False,
+        mmap_bytes: int = 0,
+        busy_timeout_s: float | None = None,
+    ) -> None:
         self.path = Path(path)
         self.readonly = readonly
         self.mmap_bytes = int(mmap_bytes)
+        self.busy_timeout_s = BUSY_TIMEOUT_S if busy_timeout_s is None else float(busy_timeout_s)
         self._local = threading.local()
         if not readonly:
             self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -124,13 +135,15 @@ class StoreFile:
         con: sqlite3.Connection | None = getattr(self._local, "con", None)
         if con is None:
             uri = f"file:{self.path}?mode={'ro' if self.readonly else 'rwc'}"
-            con = sqlite3.connect(uri, uri=True, timeout=BUSY_TIMEOUT_S, isolation_level=None, check_same_thread=False)
+            con = sqlite3.connect(
+                uri, uri=True, timeout=self.busy_timeout_s, isolation_level=None, check_same_thread=False
+            )
             if not self.readonly:
                 con.execute("PRAGMA journal_mode=WAL")
             # NORMAL is durable for WAL across application crashes (kill -9); only a power cut may lose the
             # last commit, never corrupt the file.
             con.execute("PRAGMA synchronous=NORMAL")
-            con.execute(f"PRAGMA busy_timeout={int(BUSY_TIMEOUT_S * 1000)}")
+            con.execute(f"PRAGMA busy_timeout={int(self.busy_timeout_s * 1000)}")
             if self.mmap_bytes:
                 con.execute(f"PRAGMA mmap_size={self.mmap_bytes}")
             self._local.con = con

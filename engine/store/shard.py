@@ -165,6 +165,9 @@ def merge_shard(store: StoreFile, target: StageTarget, shard: Shard, offset: int
 
 #: The store files this process has opened to merge its shards into (a worker merges many), by path.
 _OPENED: dict[str, StoreFile] = {}
+#: How long a worker's merge waits for the store's write lock: every worker of a build takes it in turn, so
+#: with many workers the wait is many merges long, not the few seconds a request of the service may wait.
+MERGE_BUSY_TIMEOUT_S = 600.0
 
 
 def merge_on_worker(target: StageTarget, shard: Shard, offset: int) -> Shard | MergedShard:
@@ -175,7 +178,7 @@ def merge_on_worker(target: StageTarget, shard: Shard, offset: int) -> Shard | M
         if store is None:
             if not _holds_reservation(target):  # no file there, or another one: never create or touch it
                 return shard
-            store = _OPENED[target.path] = StoreFile(target.path)
+            store = _OPENED[target.path] = StoreFile(target.path, busy_timeout_s=MERGE_BUSY_TIMEOUT_S)
         if merge_shard(store, target, shard, offset):
             return MergedShard(shard.tally)
     return shard

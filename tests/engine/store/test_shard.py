@@ -305,3 +305,30 @@ def test_a_shard_is_detached_after_a_failed_merge(tmp_path) -> None:
     assert [row[1] for row in con.execute("PRAGMA database_list")] == ["main"]
     with pytest.raises(sqlite3.OperationalError):
         con.execute("SELECT count(*) FROM shard.contours")
+
+
+@settings(max_examples=2, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(contour=new_contours())
+def test_a_workers_merge_waits_for_the_write_lock_as_long_as_other_merges_hold_it(
+    tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch, contour: NewContour
+) -> None:
+    # Every worker of a build merges under the store's one write lock, in turn: with many workers a merge waits
+    # many merges long, far past the few seconds a request may wait before it is told the store is busy.
+    import threading
+
+    import engine.store.connection as connection
+
+    monkeypatch.setattr(connection, "BUSY_TIMEOUT_S", 0.2)  # a request's wait, made short
+    monkeypatch.setattr(shard_module, "MERGE_BUSY_TIMEOUT_S", 10.0)
+    path = tmp_path_factory.mktemp("busy") / "store.sqlite"
+    store = CCSStore(path)
+
+    def merged_while_another_holds_the_lock(target: StageTarget) -> list[MergedShard | Shard]:
+        holder = sqlite3.connect(path, isolation_level=None, check_same_thread=False)
+        holder.execute("BEGIN IMMEDIATE")  # another worker's merge
+        threading.Timer(1.0, lambda: holder.execute("ROLLBACK")).start()
+        return [merge_on_worker(target, write_shard([contour]), 0)]
+
+    info = store.save("d", _meta("d"), merged_while_another_holds_the_lock, 1)
+    assert info.n_contours == 1
+    _assert_stored(store, "d", store.all_fids("d")[0], contour)
