@@ -16,6 +16,7 @@ blocks are checked apart from each other, on any executor, with memory for a few
 from __future__ import annotations
 
 import math
+import threading
 from collections import OrderedDict
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import Executor
@@ -358,12 +359,59 @@ def block_contacts(
 
 def near_surfaces(near: Sequence[NearItem]) -> list[SurfaceRows]:
     """A block task's surfaces as the contact check reads them: read where they lie in the spool's file (each
-    file opened once), opened, and the near ones cut to their stretches."""
-    blobs = fetched([item.whole if isinstance(item, NearSlice) else item for item in near])
+    file opened once), opened, and the near ones cut to their stretches. The surfaces a worker opens from the
+    file are kept for its next blocks (:data:`OPENED_NEAR`)."""
+    wanted = [item.whole if isinstance(item, NearSlice) else item for item in near]
+    surfaces = OPENED_NEAR.opened(wanted)
     return [
-        _stretch(surface_of(cast(bytes, blob)), item.first, item.last) if isinstance(item, NearSlice) else opened(blob)
-        for item, blob in zip(near, blobs, strict=True)
+        _stretch(cast("CCS", surface), item.first, item.last) if isinstance(item, NearSlice) else surface
+        for item, surface in zip(near, surfaces, strict=True)
     ]
+
+
+#: Bytes of surfaces a worker keeps opened from the spool's file between its block tasks.
+OPENED_NEAR_BYTES = 64 << 20
+
+
+class OpenedSlices:
+    """Surfaces opened from the spool's file, by where they lie, the most recently used kept up to
+    :data:`OPENED_NEAR_BYTES`: neighbouring blocks share most of their near surfaces, and a long contour
+    passing by is near many blocks, so a worker would otherwise read and unpickle it for each (the build
+    process kept such a cache, :class:`NearCache`, when it read them). A slice names bytes written once and
+    never moved, so what it names never changes: an entry needs no forgetting."""
+
+    def __init__(self) -> None:
+        self.items: OrderedDict[FileSlice, CCS] = OrderedDict()
+        self.size = 0
+        self._lock = threading.Lock()  # a Dask worker may run tasks in several threads
+
+    def opened(self, items: Sequence[Any]) -> list[Any]:
+        """``items`` opened: each :class:`FileSlice` read (the ones not kept, in one pass) and unpickled, and
+        kept; anything else opened as it is (:func:`~engine.payloads.opened`)."""
+        with self._lock:
+            return self._opened(items)
+
+    def _opened(self, items: Sequence[Any]) -> list[Any]:
+        missing = list(dict.fromkeys(i for i in items if isinstance(i, FileSlice) and i not in self.items))
+        for where, blob in zip(missing, fetched(missing), strict=True):
+            self.items[where] = surface_of(cast(bytes, blob))
+            self.size += where.length
+        out = []
+        for item in items:
+            if isinstance(item, FileSlice):
+                self.items.move_to_end(item)
+                out.append(self.items[item])
+            else:
+                out.append(opened(item))
+        wanted = len({i for i in items if isinstance(i, FileSlice)})
+        while self.size > OPENED_NEAR_BYTES and len(self.items) > wanted:  # never the ones just asked for
+            where, _ = self.items.popitem(last=False)
+            self.size -= where.length
+        return out
+
+
+#: The surfaces this worker process has opened from spool files.
+OPENED_NEAR = OpenedSlices()
 
 
 def input_touches(spool: Spool) -> InputTouches:

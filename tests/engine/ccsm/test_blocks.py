@@ -389,3 +389,46 @@ def test_blocks_whose_workers_cannot_read_the_spool_are_sent_again_with_their_su
     assert sent[0] == "where they lie" and sent[-1] == "surfaces"
     assert "where they lie" not in sent[sent.index("surfaces") :][sent.count("where they lie") :]
     assert spool.get_slices([0]) is None
+
+
+@pytest.mark.parametrize("budget", [0, 1 << 30])
+def test_a_worker_keeps_the_surfaces_it_opened_for_its_next_blocks(tmp_path, monkeypatch, budget: int) -> None:
+    """A long contour is near many blocks: a worker reads and opens it once while its budget lasts, and every
+    block's stretches are the spool's whatever is kept (nothing kept: read again each time)."""
+    from engine.ccsm.blocks import NearSlice, OpenedSlices, _block_tasks, near_surfaces
+
+    surfaces = random_lines()
+    spool = _disk_spool_of(surfaces, tmp_path)
+    monkeypatch.setattr(blocks, "OPENED_NEAR", OpenedSlices())
+    monkeypatch.setattr(blocks, "OPENED_NEAR_BYTES", budget)
+    reads: list[object] = []
+    real_fetched = blocks.fetched
+    monkeypatch.setattr(blocks, "fetched", lambda items: reads.extend(items) or real_fetched(items))
+    pieces = PieceIndex()
+    pieces.put(range(len(surfaces)), surfaces)
+    found = spatial_blocks(surface_boxes(surfaces), pieces, per_block=8)
+    asked = 0
+    for b, (near, *_) in zip(found, _block_tasks(found, spool, np.ones(2), [0], sliced=True), strict=True):
+        asked += len(near)
+        for k, (i, f, la, s) in enumerate(
+            zip(b.near.tolist(), b.first.tolist(), b.last.tolist(), near_surfaces(near), strict=True)
+        ):
+            rows = slice(None) if f < 0 else slice(f, la + 1)
+            assert isinstance(near[k], NearSlice) == (f >= 0)
+            np.testing.assert_array_equal(s.base, surfaces[i].base[rows])
+            np.testing.assert_array_equal(s.top, surfaces[i].top[rows])
+    every = {i for b in found for i in b.near.tolist()}
+    if budget:
+        assert len(reads) == len(every)  # each surface read once
+    else:
+        # Nothing kept but the last block's: each block reads those of its surfaces the block before did not
+        # have (one read for two stretches of one surface).
+        held: set[int] = set()
+        expected = 0
+        for b in found:
+            now = set(b.near.tolist())
+            expected += len(now - held)
+            held = now
+        assert len(reads) == expected > len(every)
+        assert asked >= len(reads)
+    spool.close()
