@@ -93,8 +93,9 @@ class StoredRows(NamedTuple):
     rows_id: str
 
 
-class LabelHead(NamedTuple):
-    """What the placement reads of a labelled contour besides its candidates (``cartography.labels.LabelHead``)."""
+class LabelSourceHead(NamedTuple):
+    """What the placement reads of a labelled contour besides its candidates (a
+    ``cartography.labels.LabelHead``), sent back by a worker instead of the contour's rows."""
 
     fid: int
     elevation: float
@@ -113,7 +114,7 @@ def stored_candidates(
     ladder: NDArray[np.float64],
     max_zoom: float,
     style: LabelStyle,
-) -> list[tuple[LabelHead, Candidates | str]]:
+) -> list[tuple[LabelSourceHead, Candidates | str]]:
     """A task of a worker: the labelled contours ``fids`` read from the store (``rows``: where; or the rows
     themselves, read by the build process) and their label candidates, each with what the placement reads of
     it.
@@ -126,7 +127,8 @@ def stored_candidates(
     records = _stored_records(rows, fids) if isinstance(rows, StoredRows) else rows
     sources = label_sources(carto, records)
     found = batch_candidates(sources, ladder, carto.latitude, max_zoom, style)
-    return [(LabelHead(s.fid, s.elevation, s.text, s.rank), cands) for s, cands in zip(sources, found, strict=True)]
+    heads = [LabelSourceHead(s.fid, s.elevation, s.text, s.rank) for s in sources]
+    return list(zip(heads, found, strict=True))
 
 
 def _stored_records(rows: StoredRows, fids: list[int]) -> list[ContourRecord]:

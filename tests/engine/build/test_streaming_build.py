@@ -107,6 +107,13 @@ def clusters_source(tmp_path_factory) -> Path:
     return write_geojson(tmp_path_factory.mktemp("clusters") / "clusters.geojson", features)
 
 
+def small_dem(tmp_path: Path) -> SourceSpec:
+    """Dataset "t": a 64 x 64 fractal DEM at 30 m, contoured every 10 m (a few hundred contours, labels too)."""
+    z = fractal_heights(11, 3.0, n=64, relief_m=200.0).astype(np.float32)
+    dem = write_geotiff(tmp_path / "t.tif", z, west=740_000.0, north=4_060_000.0, cell=30.0, crs="EPSG:32616")
+    return SourceSpec(dem, "t", "t", interval=10.0)
+
+
 def stored_rows(store: CCSStore, dataset: str) -> list[tuple]:
     """The dataset's contour rows in fid order, each with its fid counted from the dataset's first (so two
     stores' rows compare, fids included); never none (a dataset with no row would make comparisons vacuous)."""
@@ -154,9 +161,8 @@ def test_rows_and_label_candidates_made_on_an_executor_are_stored_as_made_in_the
 ) -> None:
     import engine.store.shard as shard
 
-    z = fractal_heights(11, 3.0, n=64, relief_m=200.0).astype(np.float32)
-    dem = write_geotiff(tmp_path / "t.tif", z, west=740_000.0, north=4_060_000.0, cell=30.0, crs="EPSG:32616")
-    spec = SourceSpec(dem, "t", "t", interval=10.0)
+    spec = small_dem(tmp_path)
+    dem = spec.path
     here = CCSStore(tmp_path / "here.sqlite")
     build_dataset(here, spec, workers=1)
     pooled = CCSStore(tmp_path / "pool.sqlite")
@@ -203,9 +209,7 @@ def test_a_build_whose_workers_cannot_read_its_files_sends_them_the_data_and_sto
     import engine.store.shard as shard
     from engine.payloads import FileSlice, FileUnreachable
 
-    z = fractal_heights(11, 3.0, n=64, relief_m=200.0).astype(np.float32)
-    dem = write_geotiff(tmp_path / "t.tif", z, west=740_000.0, north=4_060_000.0, cell=30.0, crs="EPSG:32616")
-    spec = SourceSpec(dem, "t", "t", interval=10.0)
+    spec = small_dem(tmp_path)
     here = CCSStore(tmp_path / "here.sqlite")
     build_dataset(here, spec, workers=1)
     build_thread = threading.get_ident()
@@ -273,9 +277,7 @@ def test_a_local_build_makes_its_rows_and_label_candidates_on_its_own_pool(
 
     monkeypatch.setattr(ccsm_build, "local_pool", recording_pool)
     if source == "dem":
-        z = fractal_heights(11, 3.0, n=64, relief_m=200.0).astype(np.float32)
-        path = write_geotiff(tmp_path / "t.tif", z, west=740_000.0, north=4_060_000.0, cell=30.0, crs="EPSG:32616")
-        spec = SourceSpec(path, "t", "t", interval=10.0)
+        spec = small_dem(tmp_path)
     else:
         monkeypatch.setattr(ccsm_build, "CHUNK", 8)  # the 45 lines: several chunks of work, so a pool
         spec = SourceSpec(clusters_source, "t", "t")
@@ -318,10 +320,8 @@ def test_the_build_process_forwards_contours_and_surfaces_without_opening_them(t
 
     monkeypatch.setattr(scratch.ReadScratch, "read_range", counting_read_range)
     monkeypatch.setattr(scratch, "pickled", counting_pickled)
-    z = fractal_heights(11, 3.0, n=64, relief_m=200.0).astype(np.float32)
-    dem = write_geotiff(tmp_path / "t.tif", z, west=740_000.0, north=4_060_000.0, cell=30.0, crs="EPSG:32616")
     store = CCSStore(tmp_path / "s.sqlite")
-    info, _ = build_dataset(store, SourceSpec(dem, "t", "t", interval=10.0), workers=2)
+    info, _ = build_dataset(store, small_dem(tmp_path), workers=2)
     contours = info.n_contours
     assert contours > 2 * 64, "more than two chunks"
     # Only the scale model's reference contours are opened here: no contour for its check, its size and shape,
@@ -331,7 +331,7 @@ def test_the_build_process_forwards_contours_and_surfaces_without_opening_them(t
     assert all(f < 1.0 for f in pickled_factors), sorted(set(pickled_factors))
     # What the workers sent is what a build in one process stores.
     alone = CCSStore(tmp_path / "alone.sqlite")
-    build_dataset(alone, SourceSpec(dem, "t", "t", interval=10.0), workers=1)
+    build_dataset(alone, small_dem(tmp_path), workers=1)
     assert stored_rows(store, "t") == stored_rows(alone, "t")
 
 
@@ -397,10 +397,8 @@ def test_label_candidates_read_by_a_worker_from_the_store_are_those_of_the_rows_
     from engine.cartography.labels import LabelStyle
     from engine.payloads import FileUnreachable
 
-    z = fractal_heights(11, 3.0, n=64, relief_m=200.0).astype(np.float32)
-    dem = write_geotiff(tmp_path / "t.tif", z, west=740_000.0, north=4_060_000.0, cell=30.0, crs="EPSG:32616")
     store = CCSStore(tmp_path / "s.sqlite")
-    info, _ = build_dataset(store, SourceSpec(dem, "t", "t", interval=10.0), workers=1)
+    info, _ = build_dataset(store, small_dem(tmp_path), workers=1)
     fids = store.all_fids("t")
     elevations = np.unique([r.elevation for r in store.load(fids)])
     carto = dataset_cartography(info, 10.0, elevations)

@@ -56,6 +56,17 @@ def random_lines(n: int = 300, seed: int = 1) -> list[CCS]:
     return out
 
 
+def lines_with_tables_of_their_own() -> list[CCS]:
+    """:func:`random_lines`, each with its own t table and vanishing scale: a stretch cut from one must carry its
+    own surface's, which the contact check reads with its rows."""
+    from dataclasses import replace
+
+    return [
+        replace(s, t_at_scale=np.linspace(0.0, 1.0, 5) ** (1 + i % 7), vanish_scale=1e5 + i)
+        for i, s in enumerate(random_lines())
+    ]
+
+
 def test_every_segment_is_owned_once_and_its_block_holds_every_stretch_that_can_meet_it() -> None:
     surfaces = random_lines()
     boxes = surface_boxes(surfaces)
@@ -150,7 +161,6 @@ def test_repair_by_small_blocks_makes_the_surfaces_of_the_repair_over_the_whole_
 
 
 def test_a_block_task_carries_whole_surfaces_as_stored_and_stretches_cut(tmp_path) -> None:
-    from dataclasses import replace
 
     from engine.ccsm.blocks import NearStretch, _block_tasks
     from engine.ccsm.spool import surface_of
@@ -158,10 +168,7 @@ def test_a_block_task_carries_whole_surfaces_as_stored_and_stretches_cut(tmp_pat
 
     # Each surface its own t table and vanishing scale: a stretch must carry its own surface's, which the
     # contact check reads with its rows.
-    surfaces = [
-        replace(s, t_at_scale=np.linspace(0.0, 1.0, 5) ** (1 + i % 7), vanish_scale=1e5 + i)
-        for i, s in enumerate(random_lines())
-    ]
+    surfaces = lines_with_tables_of_their_own()
     spool = DiskSpool(tmp_path)
     spool.put_many(enumerate(surfaces))
     pieces = PieceIndex()
@@ -271,16 +278,12 @@ def test_repair_with_the_near_cache_kept_across_checks_makes_the_surfaces_of_one
 
 
 def test_block_tasks_for_workers_carry_where_surfaces_lie_and_the_worker_cuts_the_same_stretches(tmp_path) -> None:
-    from dataclasses import replace
 
     from engine.ccsm.blocks import NearSlice, _block_tasks, near_surfaces
     from engine.payloads import FileSlice
     from engine.scratch import DiskSpool
 
-    surfaces = [
-        replace(s, t_at_scale=np.linspace(0.0, 1.0, 5) ** (1 + i % 7), vanish_scale=1e5 + i)
-        for i, s in enumerate(random_lines())
-    ]
+    surfaces = lines_with_tables_of_their_own()
     spool = DiskSpool(tmp_path)
     spool.put_many(enumerate(surfaces))
     reads: list[int] = []
