@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 from scipy.interpolate import BSpline, make_interp_spline
 
@@ -31,6 +32,9 @@ if TYPE_CHECKING:
 DEGREE = 3
 #: Heights of the wireframe rows on every characteristic link (paper: four points per link).
 WIREFRAME_HEIGHTS = (0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0)
+#: A column whose largest share of its row's length is at least this rises clearly: the averaged parameters'
+#: rounding (a few 1e-16 on values up to 1) cannot make it equal to the one before.
+CLEAR_RISE = 1e-12
 
 
 def wireframe(initial: Coords, target: Coords) -> NDArray[np.float64]:
@@ -163,6 +167,57 @@ def fit_parameters(initial: Coords, target: Coords) -> NDArray[np.float64]:
     return params
 
 
+def check_fit(initial: Coords, target: Coords) -> None:
+    """Raise what :func:`fit_parameters` raises, without making the parameters when they clearly rise.
+
+    A build with no samples between the data parameters (``tessellation_per_span`` 0) only needs the check,
+    and making the (4, N, 3) wireframe to check it was a seventh of each contour's surface: one compiled pass
+    over the rows' chords settles it for every column that takes a clear share of a row's length; anything
+    closer is checked exactly as the fit checks it.
+    """
+    if (
+        len(initial) >= DEGREE + 1
+        and initial.shape == target.shape
+        and initial.ndim == 2
+        and _rises_clearly(
+            np.ascontiguousarray(initial, dtype=np.float64),
+            np.ascontiguousarray(target, dtype=np.float64),
+            np.array(WIREFRAME_HEIGHTS),
+            CLEAR_RISE,
+        )
+    ):
+        return
+    fit_parameters(initial, target)
+
+
+@njit(cache=True)
+def _rises_clearly(initial, target, heights, share):  # pragma: no cover - compiled
+    """Whether every wireframe row has a length and every column takes at least ``share`` of some row's length
+    (so the averaged parameters rise there whatever their rounding). False sends the rows to the exact check."""
+    n = initial.shape[0]
+    chords = np.empty((heights.shape[0], n - 1))
+    for r in range(heights.shape[0]):
+        h = heights[r]
+        total = 0.0
+        for i in range(n - 1):
+            dx = ((1.0 - h) * initial[i + 1, 0] + h * target[i + 1, 0]) - ((1.0 - h) * initial[i, 0] + h * target[i, 0])
+            dy = ((1.0 - h) * initial[i + 1, 1] + h * target[i + 1, 1]) - ((1.0 - h) * initial[i, 1] + h * target[i, 1])
+            chords[r, i] = np.hypot(dx, dy)
+            total += chords[r, i]
+        # Far from underflow (where the fit's own norm of a tiny chord could round to 0) and from overflow.
+        if not (total > 1e-100 and total < np.inf):
+            return False
+        for i in range(n - 1):
+            chords[r, i] /= total
+    for i in range(n - 1):
+        best = 0.0
+        for r in range(heights.shape[0]):
+            best = max(best, chords[r, i])
+        if not best >= share:
+            return False
+    return True
+
+
 def fit_surface(initial: Coords, target: Coords, closed: bool) -> CCSurface:
     """Fit the CCS through corresponding samples of ``L0`` and ``Ln``.
 
@@ -227,7 +282,7 @@ def surface_rows(initial: Coords, target: Coords, closed: bool, per_span: int) -
         As :func:`fit_surface`.
     """
     if per_span <= 0:
-        fit_parameters(initial, target)
+        check_fit(initial, target)
         return initial.copy(), target.copy()
     surface = fit_surface(initial, target, closed)
     u = tessellation_parameters(surface.params, per_span)

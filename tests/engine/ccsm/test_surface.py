@@ -13,6 +13,8 @@ from engine.ccsm.surface import (
     WIREFRAME_HEIGHTS,
     averaged_knots,
     averaged_parameters,
+    check_fit,
+    fit_parameters,
     fit_surface,
     surface_rows,
     tessellation_parameters,
@@ -217,3 +219,58 @@ def test_surface_rows_without_a_fit_still_reject_repeated_samples() -> None:
     target[4] = target[3]
     with pytest.raises(SurfaceFitError):
         surface_rows(initial, target, False, per_span=0)
+
+
+@st.composite
+def rows_near_a_fit_failure(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray]:
+    """Corresponding rows (at UTM magnitudes or near the origin) where some steps are repeated in one or both
+    rows, or shrunk to a drawn tiny share of the row (down to below the parameters' rounding), and maybe a row
+    cut short or a NaN."""
+    seed = draw(st.integers(0, 2**32 - 1))
+    n = draw(st.integers(1, 30))
+    initial, target = open_samples(seed, n)
+    if draw(st.booleans()):  # near the origin the rows between rounding cannot hide a tiny step
+        initial, target = initial - ORIGIN, target - ORIGIN
+    if n > 1:
+        for i in draw(st.lists(st.integers(1, n - 1), max_size=4)):
+            shrink = draw(st.sampled_from([0.0, 1e-18, 1e-16, 1e-14, 1e-12, 1e-9]))
+            rows = draw(st.sampled_from([(initial,), (target,), (initial, target)]))
+            for row in rows:
+                row[i] = row[i - 1] + (row[i] - row[i - 1]) * shrink
+    if draw(st.integers(0, 20)) == 0:
+        target = target[:-1]
+    if n > 0 and draw(st.integers(0, 20)) == 0:
+        initial[draw(st.integers(0, n - 1))] = np.nan
+    return initial, target
+
+
+def fit_check_outcome(check, initial: np.ndarray, target: np.ndarray) -> str:  # type: ignore[no-untyped-def]
+    try:
+        check(initial, target)
+    except SurfaceFitError as exc:
+        return str(exc)
+    return "fits"
+
+
+@settings(deadline=None, max_examples=400)
+@given(rows=rows_near_a_fit_failure())
+def test_check_fit_refuses_exactly_what_the_fit_refuses(rows: tuple[np.ndarray, np.ndarray]) -> None:
+    initial, target = rows
+    assert fit_check_outcome(check_fit, initial, target) == fit_check_outcome(fit_parameters, initial, target)
+
+
+def test_check_fit_settles_ordinary_rows_without_making_the_wireframe(monkeypatch: pytest.MonkeyPatch) -> None:
+    import engine.ccsm.surface as surface
+
+    def no_wireframe(*_: object) -> None:
+        raise AssertionError("the wireframe was made")
+
+    monkeypatch.setattr(surface, "wireframe", no_wireframe)
+    for seed in range(20):
+        check_fit(*open_samples(seed, 30))
+    check_fit(*ring_samples())
+    initial, target = open_samples(7, 10)
+    initial[4] = initial[3]
+    target[4] = target[3]
+    with pytest.raises(AssertionError, match="wireframe"):  # a repeated sample is left to the exact check
+        check_fit(initial, target)
