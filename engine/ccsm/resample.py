@@ -15,10 +15,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from engine.errors import InvalidContour, InvalidParameter
-from engine.geom.polyline import segment_lengths
 from engine.types import Coords
 
 
@@ -51,18 +51,9 @@ def densify_path(path: Coords, spacing_m: float) -> tuple[Coords, NDArray[np.int
     vertex_index
         (n,) position of each original vertex in ``points``.
     """
-    edges = segment_lengths(path)
-    pieces = np.maximum(np.ceil(edges / spacing_m).astype(np.intp), 1)
-    starts = np.concatenate([[0], np.cumsum(pieces)])
-    total = int(starts[-1]) + 1
-    edge_of = np.repeat(np.arange(len(edges)), pieces)
-    step = np.arange(total - 1) - starts[edge_of]
-    frac = step / pieces[edge_of]
-    a = path[edge_of]
-    b = path[edge_of + 1]
-    points = np.empty((total, 2))
-    points[:-1] = a + (b - a) * frac[:, None]
-    points[-1] = path[-1]
+    if len(path) == 0:
+        raise InvalidContour("a path needs at least one vertex")
+    points, starts = _densified(np.ascontiguousarray(path, dtype=np.float64), float(spacing_m))
     return points, starts.astype(np.intp)
 
 
@@ -87,19 +78,64 @@ def correspond(path: Coords, characteristic: NDArray[np.intp], spacing_m: float)
     char = np.asarray(characteristic, dtype=np.intp)
     if len(char) < 2 or char[0] != 0 or char[-1] != len(path) - 1 or np.any(np.diff(char) <= 0):
         raise InvalidContour("characteristic points must be ascending and include both ends")
+    path = np.ascontiguousarray(path, dtype=np.float64)
     initial, vertex_pos = densify_path(path, spacing_m)
-    # Arc length of every sample, and of every characteristic point, along L0.
-    arclen = np.concatenate([[0.0], np.cumsum(segment_lengths(initial))])
     char_pos = vertex_pos[char]
-    piece = np.searchsorted(char_pos, np.arange(len(initial)), side="right") - 1
-    piece = np.minimum(piece, len(char) - 2)
-    s0 = arclen[char_pos[piece]]
-    s1 = arclen[char_pos[piece + 1]]
-    span = s1 - s0
-    if np.any(span <= 0):
+    target = np.empty_like(initial)
+    if not _partners(path, initial, char, char_pos, target):
         raise InvalidContour("a characteristic sub-polyline has zero length")
-    frac = (arclen - s0) / span
-    a = path[char[piece]]
-    b = path[char[piece + 1]]
-    target = a + (b - a) * frac[:, None]
     return Correspondence(initial=initial, target=target, characteristic=char_pos)
+
+
+# Both kernels do, sample by sample, the NumPy arithmetic they replaced (the same operations in the same order,
+# so the samples are the same to the last bit): a contour of a few dozen vertices spent its correspondence in
+# the overhead of a dozen NumPy calls, a tenth of its surface.
+@njit(cache=True)
+def _densified(path, spacing):  # pragma: no cover - compiled
+    """The path's vertices with ``ceil(edge / spacing)`` equal pieces on every edge, and each vertex's index."""
+    n = path.shape[0]
+    pieces = np.empty(max(n - 1, 0), np.int64)
+    total = 1
+    for e in range(n - 1):
+        pieces[e] = max(int(np.ceil(np.hypot(path[e + 1, 0] - path[e, 0], path[e + 1, 1] - path[e, 1]) / spacing)), 1)
+        total += pieces[e]
+    points = np.empty((total, 2))
+    starts = np.empty(n, np.int64)
+    at = 0
+    for e in range(n - 1):
+        starts[e] = at
+        for step in range(pieces[e]):
+            frac = step / pieces[e]
+            for c in range(2):
+                points[at, c] = path[e, c] + (path[e + 1, c] - path[e, c]) * frac
+            at += 1
+    starts[n - 1] = at
+    points[at, 0] = path[n - 1, 0]
+    points[at, 1] = path[n - 1, 1]
+    return points, starts
+
+
+@njit(cache=True)
+def _partners(path, initial, char, char_pos, target):  # pragma: no cover - compiled
+    """Fill ``target`` with each sample's partner on Ln, at its fraction of arc length along its piece of L0
+    (the piece between the characteristic points at or before it and after it). False if a piece has no length."""
+    m = initial.shape[0]
+    arclen = np.empty(m)
+    arclen[0] = 0.0
+    for k in range(1, m):
+        arclen[k] = arclen[k - 1] + np.hypot(initial[k, 0] - initial[k - 1, 0], initial[k, 1] - initial[k - 1, 1])
+    last_piece = char.shape[0] - 2
+    piece = 0
+    for k in range(m):
+        while piece < last_piece and char_pos[piece + 1] <= k:
+            piece += 1
+        s0 = arclen[char_pos[piece]]
+        span = arclen[char_pos[piece + 1]] - s0
+        if span <= 0.0:
+            return False
+        frac = (arclen[k] - s0) / span
+        a = char[piece]
+        b = char[piece + 1]
+        for c in range(2):
+            target[k, c] = path[a, c] + (path[b, c] - path[a, c]) * frac
+    return True

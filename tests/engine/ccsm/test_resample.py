@@ -14,7 +14,7 @@ from numpy.testing import assert_allclose
 from engine.ccsm.resample import Correspondence, correspond, densify_path
 from engine.errors import InvalidContour, InvalidParameter
 from engine.geom.douglas_peucker import douglas_peucker
-from engine.geom.polyline import closed_path
+from engine.geom.polyline import closed_path, segment_lengths
 
 HYPOTHESIS = settings(deadline=None, max_examples=50)
 
@@ -126,3 +126,69 @@ def test_correspond_rejects_a_non_positive_or_non_finite_spacing(spacing: float)
 def test_correspond_rejects_characteristic_points_missing_an_end_or_unordered(keep: list[int]) -> None:
     with pytest.raises(InvalidContour):
         correspond(np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 1.0]]), np.array(keep), 1.0)
+
+
+# -- the compiled kernels against the NumPy arithmetic they replaced, to the last bit --------------------------
+
+
+def numpy_densify_path(path: np.ndarray, spacing_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """densify_path as whole-array NumPy: the rule stated array by array."""
+    edges = segment_lengths(path)
+    pieces = np.maximum(np.ceil(edges / spacing_m).astype(np.intp), 1)
+    starts = np.concatenate([[0], np.cumsum(pieces)])
+    edge_of = np.repeat(np.arange(len(edges)), pieces)
+    frac = (np.arange(int(starts[-1])) - starts[edge_of]) / pieces[edge_of]
+    a, b = path[edge_of], path[edge_of + 1]
+    points = np.concatenate([a + (b - a) * frac[:, None], path[-1:]])
+    return points, starts.astype(np.intp)
+
+
+def numpy_correspond(path: np.ndarray, char: np.ndarray, spacing_m: float) -> tuple[np.ndarray, ...]:
+    """correspond as whole-array NumPy: (initial, target, characteristic), or InvalidContour for a flat piece."""
+    initial, vertex_pos = numpy_densify_path(path, spacing_m)
+    arclen = np.concatenate([[0.0], np.cumsum(segment_lengths(initial))])
+    char_pos = vertex_pos[char]
+    piece = np.minimum(np.searchsorted(char_pos, np.arange(len(initial)), side="right") - 1, len(char) - 2)
+    s0, s1 = arclen[char_pos[piece]], arclen[char_pos[piece + 1]]
+    if np.any(s1 - s0 <= 0):
+        raise InvalidContour("a characteristic sub-polyline has zero length")
+    a, b = path[char[piece]], path[char[piece + 1]]
+    return initial, a + (b - a) * ((arclen - s0) / (s1 - s0))[:, None], char_pos
+
+
+@st.composite
+def line_with_repeats(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, float]:
+    """A line_with_characteristic whose vertices may be repeated (edges of no length, pieces of no length),
+    with any ascending characteristic points that hold both ends."""
+    path, keep, spacing = draw(line_with_characteristic())
+    repeat = draw(st.lists(st.integers(0, len(path) - 1), max_size=3))
+    path = np.insert(path, repeat, path[repeat], axis=0)
+    inner = draw(st.sets(st.integers(1, len(path) - 2), max_size=len(path) - 2))
+    if draw(st.booleans()):  # a DP-like choice, shifted past the repeats; or any drawn one
+        inner = set(np.searchsorted(np.sort(repeat), keep[1:-1], side="right") + keep[1:-1])
+    return path, np.array(sorted({0, len(path) - 1} | inner)), spacing
+
+
+@given(line_with_repeats())
+@settings(deadline=None, max_examples=300)
+def test_correspond_gives_the_numpy_arithmetic_bit_for_bit(case: tuple[np.ndarray, np.ndarray, float]) -> None:
+    path, keep, spacing = case
+    try:
+        expected = numpy_correspond(path, keep, spacing)
+    except InvalidContour:
+        with pytest.raises(InvalidContour, match="zero length"):
+            correspond(path, keep, spacing)
+        return
+    corr = correspond(path, keep, spacing)
+    for got, want in zip((corr.initial, corr.target, corr.characteristic), expected, strict=True):
+        assert got.shape == want.shape
+        assert np.array_equal(got, want)
+    points, vertex_index = densify_path(path, spacing)
+    want_points, want_index = numpy_densify_path(path, spacing)
+    assert np.array_equal(points, want_points)
+    assert np.array_equal(vertex_index, want_index)
+
+
+def test_densify_path_refuses_an_empty_path() -> None:
+    with pytest.raises(InvalidContour, match="at least one vertex"):
+        densify_path(np.zeros((0, 2)), 1.0)
