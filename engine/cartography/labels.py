@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from engine.cartography.label_grid import kept_apart
+from engine.cartography.label_lines import straightness_at_zooms
 from engine.ccsm.regression import t_at_scales
 from engine.errors import short_reason
 from engine.parallel import map_ordered
@@ -123,18 +124,6 @@ def _t_through_zooms(
     return zooms, ts
 
 
-def _straightness(line: NDArray[np.float64], width: float) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-    """Per row: chord / arc of the line over ``width`` metres of it centred at the row (the window's ends
-    interpolated along the line), and whether the window lies wholly on the line."""
-    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(line, axis=0).T))])
-    inside = (s - width / 2 >= 0) & (s + width / 2 <= s[-1])
-    a = np.clip(s - width / 2, 0.0, s[-1])
-    b = np.clip(s + width / 2, 0.0, s[-1])
-    pa = np.column_stack([np.interp(a, s, line[:, 0]), np.interp(a, s, line[:, 1])])
-    pb = np.column_stack([np.interp(b, s, line[:, 0]), np.interp(b, s, line[:, 1])])
-    return np.hypot(*(pb - pa).T) / np.maximum(b - a, 1e-9), inside
-
-
 def contour_candidates(
     src: LabelSource, ladder: NDArray[np.float64], latitude: float, max_zoom: float, style: LabelStyle
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
@@ -156,11 +145,10 @@ def contour_candidates(
     mpp = metres_per_px(zooms)
     label_px = style.char_px * len(src.text) + 2 * style.padding_px
     drift = np.hypot(*(top - base).T) * float(np.max(ts / mpp))
-    good = np.zeros((len(zooms), len(base)), dtype=bool)
-    ratio = np.zeros((len(zooms), len(base)))
-    for k in range(len(zooms)):
-        ratio[k], inside = _straightness((1 - ts[k]) * base + ts[k] * top, label_px * float(mpp[k]))
-        good[k] = inside & (ratio[k] >= style.min_straightness) & (drift <= style.max_drift_px)
+    ratio, inside = straightness_at_zooms(
+        np.ascontiguousarray(base), np.ascontiguousarray(top), np.asarray(ts, dtype=np.float64), label_px * mpp
+    )
+    good = inside & (ratio >= style.min_straightness) & (drift <= style.max_drift_px)[None, :]
     # A row's first zoom: the first of a run of good zooms that lasts to the last zoom.
     holds = np.flip(np.cumprod(np.flip(good, axis=0), axis=0), axis=0).astype(bool)
     cand = np.flatnonzero(holds[-1])

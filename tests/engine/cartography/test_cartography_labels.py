@@ -245,3 +245,43 @@ def test_labels_along_a_line_are_spaced_as_by_testing_every_pair(candidates, spa
         if not (np.abs(at[expected] - at[j]) < spacing_px * metres_per_px(both_show)).any():
             expected[j] = True
     assert spaced_along(at, first, score, spacing).tolist() == expected.tolist()
+
+
+def numpy_straightness(line: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """A line's straightness under a label window at every row, as whole-array NumPy (the rule stated plainly):
+    chord / arc over ``width`` metres centred at the row, ends clamped and interpolated; window wholly inside."""
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(line, axis=0).T))])
+    inside = (s - width / 2 >= 0) & (s + width / 2 <= s[-1])
+    a = np.clip(s - width / 2, 0.0, s[-1])
+    b = np.clip(s + width / 2, 0.0, s[-1])
+    pa = np.column_stack([np.interp(a, s, line[:, 0]), np.interp(a, s, line[:, 1])])
+    pb = np.column_stack([np.interp(b, s, line[:, 0]), np.interp(b, s, line[:, 1])])
+    return np.hypot(*(pb - pa).T) / np.maximum(b - a, 1e-9), inside
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    rows=st.integers(2, 60),
+    zooms=st.integers(1, 12),
+    repeats=st.lists(st.integers(0, 59), max_size=4),
+    at_utm=st.booleans(),
+)
+def test_the_compiled_straightness_is_the_numpy_arithmetic_bit_for_bit(seed, rows, zooms, repeats, at_utm) -> None:
+    from engine.cartography.label_lines import straightness_at_zooms
+
+    rng = np.random.default_rng(seed)
+    base = np.cumsum(rng.normal(0.0, 40.0, (rows, 2)), axis=0) + ([500_000.0, 4_000_000.0] if at_utm else 0.0)
+    top = base + rng.normal(0.0, 5.0, (rows, 2))
+    for i in repeats:  # rows of no length between them, as a line with repeated samples has
+        if 0 < i < rows:
+            base[i], top[i] = base[i - 1], top[i - 1]
+    ts = np.sort(rng.uniform(0.0, 1.0, zooms))
+    ts[0] = rng.choice([0.0, ts[0]])
+    widths = rng.uniform(0.0, 3.0, zooms) * float(np.hypot(*np.ptp(base, axis=0)) + 1.0)
+    widths[rng.random(zooms) < 0.2] = 0.0  # a window of no length: its ends fall on the rows themselves
+    ratio, inside = straightness_at_zooms(base, top, ts, widths)
+    for k in range(zooms):
+        want_ratio, want_inside = numpy_straightness((1 - ts[k]) * base + ts[k] * top, float(widths[k]))
+        assert np.array_equal(ratio[k], want_ratio)
+        assert np.array_equal(inside[k], want_inside)
