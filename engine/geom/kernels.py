@@ -179,3 +179,45 @@ def discrete_frechet(p: np.ndarray, q: np.ndarray, bound: float) -> float:  # pr
     if hi_prev != m - 1:
         return inf
     return np.sqrt(prev[m - 1])
+
+
+#: Rounding of a sum of n float64 terms, in any order, relative to the sum of their magnitudes: at most
+#: (n - 1) units of 2**-53 each way; twice that, and twice again, covers the two sums a shoelace area takes.
+_SUM_ROUNDING = 4.0 * 2.0**-53
+
+
+@njit(cache=True)
+def first_small_slice(base, top, ts, thresholds):  # pragma: no cover - compiled
+    """The first k whose ring slice ``(1 - ts[k]) base + ts[k] top`` ((M, 2) rows, the ring without its repeated
+    first vertex) has a shoelace area below ``thresholds[k]``; -1 if none has; -2 if, before the first small one,
+    an area is too close to its threshold for this pass to tell.
+
+    The slices are made, and taken relative to their first vertex, as ``engine.geom.polyline.ring_areas`` makes
+    them; its sums go in NumPy's own order, these in another, so a verdict counts only when the area clears its
+    threshold by more than both sums' rounding could move it. Stops at the first small slice.
+    """
+    m = base.shape[0]
+    for k in range(ts.shape[0]):
+        t = ts[k]
+        x0 = (1.0 - t) * base[0, 0] + t * top[0, 0]
+        y0 = (1.0 - t) * base[0, 1] + t * top[0, 1]
+        xa = 0.0
+        ya = 0.0
+        xy = 0.0
+        yx = 0.0
+        size = 0.0
+        for i in range(1, m):
+            xb = ((1.0 - t) * base[i, 0] + t * top[i, 0]) - x0
+            yb = ((1.0 - t) * base[i, 1] + t * top[i, 1]) - y0
+            xy += xa * yb
+            yx += ya * xb
+            size += abs(xa * yb) + abs(ya * xb)
+            xa = xb
+            ya = yb
+        area = abs(xy - yx) / 2.0
+        margin = m * _SUM_ROUNDING * size + 1e-300
+        if area < thresholds[k] - margin:
+            return k
+        if not area > thresholds[k] + margin:
+            return -2
+    return -1

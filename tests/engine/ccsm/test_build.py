@@ -7,13 +7,17 @@ import math
 import numpy as np
 import pytest
 import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from numpy.testing import assert_array_equal
 from synthetic_shapes import circle_coords, noisy_ellipse_coords, noisy_line_coords
 
 from engine.ccsm.build import BuiltSet, build_contour_set, vanish_scale
-from engine.ccsm.ccs import build_ccs
+from engine.ccsm.ccs import CCS, build_ccs
 from engine.ccsm.regression import ScaleModel
+from engine.geom.polyline import ring_areas
 from engine.params import BuildParams
+from engine.tolerances import MIN_VISIBLE_RING_SIDE_M
 from engine.types import Contour, ContourSet
 
 PARAMS = BuildParams()
@@ -158,6 +162,72 @@ def test_vanish_scale_between_source_and_target_is_the_first_ladder_scale_where_
     scale = vanish_scale(ccs, ScaleModel(PARAMS.source_scale, PARAMS.target_scale, ladder, ()))
     assert scale == pytest.approx(expected, rel=1e-12)
     assert PARAMS.source_scale < scale < PARAMS.target_scale
+
+
+def vanish_scale_by_every_slice(ccs: CCS, model: ScaleModel) -> float:
+    """vanish_scale's rule between source and target scale, stated with NumPy: every ladder slice's area at
+    once, the first below its threshold."""
+    t = np.clip(ccs.t_at_scale, 0.0, 1.0)[:, None, None]
+    areas = ring_areas((1.0 - t) * ccs.base[:-1] + t * ccs.top[:-1])
+    small = np.flatnonzero(areas < (MIN_VISIBLE_RING_SIDE_M * model.ladder) ** 2)
+    if len(small):
+        return float(model.ladder[small[0]])
+    return max(model.target_scale, math.sqrt(ring_areas(ccs.top[None, :-1])[0]) / MIN_VISIBLE_RING_SIDE_M)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    vertices=st.integers(3, 80),
+    size_m=st.floats(1.0, 3000.0),
+    shrink=st.floats(0.0, 1.2),
+    tie_at=st.one_of(st.none(), st.integers(0, 31)),
+)
+def test_vanish_scale_is_the_first_ladder_slice_below_its_threshold_as_numpy_finds_it(
+    seed: int, vertices: int, size_m: float, shrink: float, tie_at: int | None
+) -> None:
+    # Rings at UTM magnitudes shrinking (or not) towards a drawn top; ``tie_at`` puts a ladder scale exactly where
+    # its slice's area meets the threshold, which only NumPy's own sums can settle.
+    rng = np.random.default_rng(seed)
+    angle = np.sort(rng.uniform(0.0, 2.0 * np.pi, vertices))
+    radius = size_m * rng.uniform(0.5, 1.0, vertices)
+    ring = np.column_stack([np.cos(angle), np.sin(angle)]) * radius[:, None] + [650_000.0, 5_100_000.0]
+    top = ring.mean(axis=0) + (ring - ring.mean(axis=0)) * shrink + rng.normal(0.0, size_m / 50, ring.shape)
+    base, top = np.vstack([ring, ring[:1]]), np.vstack([top, top[:1]])
+    ladder = np.geomspace(PARAMS.source_scale, PARAMS.target_scale, 32)
+    t = np.sort(rng.uniform(-0.1, 1.1, 32))
+    ccs = CCS("r", 0.0, True, base, top, np.array([0.0, 1.0]), np.array([1.0, 0.9]), 1.0, vertices, 3, t_at_scale=t)
+    if tie_at is not None:
+        tk = np.clip(t[tie_at], 0.0, 1.0)
+        area = ring_areas(((1.0 - tk) * base[:-1] + tk * top[:-1])[None])[0]
+        ladder[tie_at] = math.sqrt(area) / MIN_VISIBLE_RING_SIDE_M
+    model = ScaleModel(PARAMS.source_scale, PARAMS.target_scale, ladder, ())
+    if math.sqrt(ring_areas(base[None, :-1])[0]) / MIN_VISIBLE_RING_SIDE_M <= PARAMS.source_scale:
+        return  # too small at the source scale: decided before any ladder slice
+    assert vanish_scale(ccs, model) == vanish_scale_by_every_slice(ccs, model)
+
+
+@settings(max_examples=300, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), vertices=st.integers(3, 300), at=st.integers(0, 7))
+def test_the_compiled_area_pass_never_calls_a_slice_at_its_threshold_other_than_numpy_does(
+    seed: int, vertices: int, at: int
+) -> None:
+    # A threshold equal to NumPy's own area of that slice: NumPy calls it not small; the compiled pass, whose
+    # sums round differently, must say so too or say it cannot tell (-2), never call it small.
+    from engine.geom.kernels import first_small_slice
+
+    rng = np.random.default_rng(seed)
+    angle = np.sort(rng.uniform(0.0, 2.0 * np.pi, vertices))
+    ring = np.column_stack([np.cos(angle), np.sin(angle)]) * rng.uniform(50.0, 100.0, (vertices, 1))
+    base = ring + [650_000.0, 5_100_000.0]
+    top = base + rng.normal(0.0, 5.0, base.shape)
+    t = np.sort(rng.uniform(0.0, 1.0, 8))
+    areas = ring_areas((1.0 - t[:, None, None]) * base + t[:, None, None] * top)
+    thresholds = areas / 2.0  # every slice clearly big enough...
+    thresholds[at] = areas[at]  # ...but one exactly at its area
+    assert first_small_slice(base, top, t, thresholds) in (-1, -2)
+    thresholds[at] = np.nextafter(areas[at], np.inf)  # one unit above: NumPy calls it small
+    assert first_small_slice(base, top, t, thresholds) in (at, -2)
 
 
 def test_built_set_carries_the_crs_and_name(built_one: BuiltSet) -> None:
