@@ -33,22 +33,35 @@ def straightness_at_zooms(base, top, ts, widths):  # pragma: no cover - compiled
             s[i] = s[i - 1] + np.hypot(line[i, 0] - line[i - 1, 0], line[i, 1] - line[i - 1, 1])
         end = s[m - 1]
         half = widths[k] / 2
+        # Both window ends only move forward along the line from row to row: each finds its segment by walking
+        # on from where it was, not by a search.
+        ja = 0
+        jb = 0
         for i in range(m):
             inside[k, i] = s[i] - half >= 0 and s[i] + half <= end
             a = min(max(s[i] - half, 0.0), end)
             b = min(max(s[i] + half, 0.0), end)
-            ax, ay = _at(s, line, a)
-            bx, by = _at(s, line, b)
+            ja = _last_at_or_before(s, a, ja)
+            jb = _last_at_or_before(s, b, jb)
+            ax, ay = _at(s, line, a, ja)
+            bx, by = _at(s, line, b, jb)
             ratio[k, i] = np.hypot(bx - ax, by - ay) / max(b - a, 1e-9)
     return ratio, inside
 
 
 @njit(cache=True)
-def _at(s, line, x):  # pragma: no cover - compiled
-    """The point of ``line`` at arc length ``x`` (within ``s[0]``..``s[-1]``), by ``np.interp``'s rule: the last
-    row at or before ``x``, its own point when ``x`` is on it, the slope's other end if the first form is NaN."""
+def _last_at_or_before(s, x, j):  # pragma: no cover - compiled
+    """The last row whose arc length is at most ``x`` (the row ``np.interp`` interpolates from), from ``j`` on."""
+    while j + 1 < s.shape[0] and s[j + 1] <= x:
+        j += 1
+    return j
+
+
+@njit(cache=True)
+def _at(s, line, x, j):  # pragma: no cover - compiled
+    """The point of ``line`` at arc length ``x`` (within ``s[0]``..``s[-1]``; ``j`` the last row at or before it), by
+    ``np.interp``'s rule: its own point when ``x`` is on the row, the slope's other end if the first form is NaN."""
     m = s.shape[0]
-    j = np.searchsorted(s, x, side="right") - 1
     if j >= m - 1 or s[j] == x:
         return line[j, 0], line[j, 1]
     out = np.empty(2)
