@@ -221,3 +221,19 @@ def first_small_slice(base, top, ts, thresholds):  # pragma: no cover - compiled
         if not area > thresholds[k] + margin:
             return -2
     return -1
+
+
+@njit(cache=True)
+def path_fault(xy, closed):  # pragma: no cover - compiled
+    """What first makes (n, 2) ``xy`` unusable as a contour's path: 1 a NaN or infinite coordinate, 2 two
+    consecutive vertices at the same point (for a ring, the last and the first too), 0 neither."""
+    n = xy.shape[0]
+    for i in range(n):
+        if not (np.isfinite(xy[i, 0]) and np.isfinite(xy[i, 1])):
+            return 1
+    for i in range(1, n):
+        if xy[i, 0] == xy[i - 1, 0] and xy[i, 1] == xy[i - 1, 1]:
+            return 2
+    if closed and n > 1 and xy[0, 0] == xy[n - 1, 0] and xy[0, 1] == xy[n - 1, 1]:
+        return 2
+    return 0

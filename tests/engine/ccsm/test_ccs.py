@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
 from engine.ccsm.ccs import build_ccs, build_surface, check_contour, slice_area
@@ -184,6 +186,45 @@ def test_invalid_contour_raises_naming_its_id(coords: np.ndarray, closed: bool, 
     with pytest.raises(InvalidContour, match="feature-42") as info:
         build_ccs(contour, DEFAULT)
     assert why in str(info.value)
+
+
+def contour_fault_by_numpy(xy: np.ndarray, closed: bool) -> str:
+    """check_contour's rule stated with NumPy: the first of NaN, too few vertices, a repeated step, no length."""
+    if not np.all(np.isfinite(xy)):
+        return "NaN"
+    if len(xy) < (3 if closed else 2):
+        return "vertices"
+    steps = np.diff(np.concatenate([xy, xy[:1]]) if closed else xy, axis=0)
+    if np.any(np.all(steps == 0, axis=1)):
+        return "repeated"
+    if np.hypot(steps[:, 0], steps[:, 1]).sum() <= 0:
+        return "zero length"
+    return "fine"
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(0, 12),
+    closed=st.booleans(),
+    repeat=st.lists(st.integers(0, 11), max_size=2),
+    bad=st.sampled_from([None, np.nan, np.inf, -np.inf]),
+    tiny=st.booleans(),
+)
+def test_check_contour_refuses_what_the_numpy_rule_refuses(seed, n, closed, repeat, bad, tiny) -> None:  # type: ignore[no-untyped-def]
+    rng = np.random.default_rng(seed)
+    xy = rng.integers(0, 3, (n, 2)).astype(float) * (1e-320 if tiny else 1.0) + 500_000.0 * (not tiny)
+    for i in repeat:
+        if 0 < i < n:
+            xy[i] = xy[i - 1]
+    if bad is not None and n:
+        xy[rng.integers(0, n), rng.integers(0, 2)] = bad
+    want = contour_fault_by_numpy(xy, closed)
+    if want == "fine":
+        check_contour(Contour("c", 0.0, xy, closed))
+        return
+    with pytest.raises(InvalidContour, match=want):
+        check_contour(Contour("c", 0.0, xy, closed))
 
 
 def test_check_contour_accepts_a_valid_contour(noisy_open_line: Contour) -> None:
