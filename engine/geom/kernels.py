@@ -237,3 +237,110 @@ def path_fault(xy, closed):  # pragma: no cover - compiled
     if closed and n > 1 and xy[0, 0] == xy[n - 1, 0] and xy[0, 1] == xy[n - 1, 1]:
         return 2
     return 0
+
+
+@njit(cache=True)
+def numpy_sum(a):  # pragma: no cover - compiled
+    """``a.sum()`` of a contiguous float64 array, to the last bit: NumPy's own order (pairwise: halves split at
+    multiples of 8 down to blocks of at most 128, each summed in eight running sums), from its identity 0.0.
+
+    The halves are walked with a stack of their own: a recursive kernel crashed when loaded from numba's cache.
+    """
+    los = np.empty(64, np.int64)
+    ns = np.empty(64, np.int64)
+    stage = np.zeros(64, np.int64)
+    sums = np.empty(64)
+    top = 0
+    done = 0
+    los[0] = 0
+    ns[0] = a.shape[0]
+    while top >= 0:
+        lo, n = los[top], ns[top]
+        if n <= 128:
+            sums[done] = _block_sum(a, lo, n)
+            done += 1
+            top -= 1
+        elif stage[top] < 2:  # first the lower half, then the upper one
+            half = n // 2
+            half -= half % 8
+            stage[top] += 1
+            los[top + 1] = lo if stage[top] == 1 else lo + half
+            ns[top + 1] = half if stage[top] == 1 else n - half
+            stage[top + 1] = 0
+            top += 1
+        else:
+            done -= 1
+            sums[done - 1] = sums[done - 1] + sums[done]
+            top -= 1
+    return 0.0 + sums[0]
+
+
+@njit(cache=True)
+def _block_sum(a, lo, n):  # pragma: no cover - compiled
+    """NumPy's sum of at most 128 values: in order below 8, else eight running sums combined pairwise, then the
+    rest in order."""
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[lo + i]
+        return res
+    r = a[lo : lo + 8].copy()
+    i = 8
+    while i < n - n % 8:
+        for j in range(8):
+            r[j] += a[lo + i + j]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@njit(cache=True)
+def path_length_of(xy, closed):  # pragma: no cover - compiled
+    """Length of (n, 2) ``xy`` (a ring with its closing step), as ``np.hypot`` of its steps summed by NumPy."""
+    n = xy.shape[0]
+    steps = n if closed and n > 0 else max(n - 1, 0)
+    lengths = np.empty(steps)
+    for i in range(steps):
+        j = i + 1 if i + 1 < n else 0
+        lengths[i] = np.hypot(xy[j, 0] - xy[i, 0], xy[j, 1] - xy[i, 1])
+    return numpy_sum(lengths)
+
+
+@njit(cache=True)
+def resampled(xy, count):  # pragma: no cover - compiled
+    """``count`` >= 2 points equally spaced along (n >= 1, 2) ``xy``, both ends included: the arc length by
+    ``np.hypot`` and a running sum, the targets as ``np.linspace(0, length, count)`` makes them, each point by
+    ``np.interp``'s rule (the last row at or before it, its own point on a row, NaN's fallbacks)."""
+    n = xy.shape[0]
+    cum = np.empty(n)
+    cum[0] = 0.0
+    for i in range(1, n):
+        cum[i] = cum[i - 1] + np.hypot(xy[i, 0] - xy[i - 1, 0], xy[i, 1] - xy[i - 1, 1])
+    total = cum[n - 1]
+    step = total / (count - 1)
+    out = np.empty((count, 2))
+    j = 0
+    for i in range(count):
+        if i == count - 1:
+            x = total
+        elif step == 0.0:  # np.linspace's way for a step that underflows
+            x = i / (count - 1) * total + 0.0
+        else:
+            x = i * step + 0.0
+        while j + 1 < n and cum[j + 1] <= x:
+            j += 1
+        for c in range(2):
+            if j == n - 1 or cum[j] == x:
+                v = xy[j, c]
+            else:
+                slope = (xy[j + 1, c] - xy[j, c]) / (cum[j + 1] - cum[j])
+                v = slope * (x - cum[j]) + xy[j, c]
+                if np.isnan(v):
+                    v = slope * (x - cum[j + 1]) + xy[j + 1, c]
+                    if np.isnan(v) and xy[j, c] == xy[j + 1, c]:
+                        v = xy[j, c]
+            out[i, c] = v
+    return out

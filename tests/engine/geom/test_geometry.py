@@ -107,3 +107,48 @@ def test_resample_by_arclength_rejects_fewer_than_two_points(n: int) -> None:
 def test_ring_area_is_accurate_for_a_small_ring_far_from_the_origin() -> None:
     square = np.array([[750_000.0, 4_060_000.0]]) + np.array([[0.0, 0.0], [0.1, 0.0], [0.1, 0.1], [0.0, 0.1]])
     assert ring_area(square) == pytest.approx(0.01, rel=1e-6)
+
+
+# -- the compiled measures against the NumPy they replaced, to the last bit ------------------------------------
+
+
+@settings(deadline=None, max_examples=300)
+@given(seed=st.integers(0, 2**32 - 1), n=st.one_of(st.integers(0, 300), st.integers(300, 20_000)))
+def test_numpy_sum_is_numpys_sum_bit_for_bit(seed: int, n: int) -> None:
+    from engine.geom.kernels import numpy_sum
+
+    rng = np.random.default_rng(seed)
+    values = rng.exponential(1.0, n) * 10.0 ** rng.uniform(-8.0, 8.0, n)  # magnitudes wide enough to round
+    assert numpy_sum(values) == values.sum()
+
+
+@st.composite
+def lines_with_repeats(draw: st.DrawFn) -> np.ndarray:
+    """Lines of 1 to 400 vertices, some repeated (steps of no length), at UTM magnitudes."""
+    seed = draw(st.integers(0, 2**32 - 1))
+    n = draw(st.one_of(st.integers(1, 12), st.integers(12, 400)))
+    rng = np.random.default_rng(seed)
+    line = np.cumsum(rng.normal(0.0, 25.0, (n, 2)), axis=0) + [750_000.0, 4_060_000.0]
+    for i in draw(st.lists(st.integers(1, 399), max_size=3)):
+        if i < n:
+            line[i] = line[i - 1]
+    return line
+
+
+@settings(deadline=None, max_examples=300)
+@given(line=lines_with_repeats(), closed=st.booleans())
+def test_path_length_is_numpys_sum_of_the_segment_lengths_bit_for_bit(line: np.ndarray, closed: bool) -> None:
+    assert path_length(line, closed) == float(segment_lengths(closed_path(line) if closed else line).sum())
+
+
+@settings(deadline=None, max_examples=300)
+@given(line=lines_with_repeats(), count=st.integers(2, 700))
+def test_resampling_is_numpys_interpolation_at_linspace_targets_bit_for_bit(line: np.ndarray, count: int) -> None:
+    cumlen = cumulative_length(line)
+    expected = points_at_lengths(line, cumlen, np.linspace(0.0, cumlen[-1], count))
+    assert np.array_equal(resample_by_arclength(line, count), expected)
+
+
+def test_resampling_refuses_a_line_with_no_vertices() -> None:
+    with pytest.raises(InvalidParameter, match="no vertices"):
+        resample_by_arclength(np.zeros((0, 2)), 3)
