@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from engine.errors import InvalidParameter
-from engine.geom.kernels import dp_significance
+from engine.geom.kernels import dp_significance, ring_significance
 from engine.types import Coords
 
 IndexArray = NDArray[np.intp]
@@ -68,21 +68,9 @@ def significance(coords: Coords, closed: bool = False) -> NDArray[np.float64]:
         if closed:
             sig[:] = np.inf  # a ring of three vertices is already the minimal triangle
         return sig
-    a, b = ring_anchors(xy)
-    first_half = xy[a : b + 1]
-    second_half = np.concatenate([xy[b:], xy[: a + 1]])
-    sig1 = dp_significance(first_half)
-    sig2 = dp_significance(second_half)
-    sig = np.empty(n)
-    sig[a : b + 1] = sig1
-    tail = np.concatenate([np.arange(b, n), np.arange(0, a + 1)])
-    sig[tail] = sig2
-    sig[a] = sig[b] = np.inf
-    # Keep at least a triangle: the most significant vertex of either half can never go.
-    candidates = np.where(np.isfinite(sig))[0]
-    if len(candidates):
-        sig[candidates[np.argmax(sig[candidates])]] = np.inf
-    return sig
+    # One compiled pass for a ring: its anchors, both halves and the triangle were a dozen NumPy calls, most of
+    # a small ring's target.
+    return ring_significance(xy)
 
 
 def douglas_peucker(coords: Coords, epsilon_m: float, closed: bool = False) -> IndexArray:

@@ -344,3 +344,53 @@ def resampled(xy, count):  # pragma: no cover - compiled
                         v = xy[j, c]
             out[i, c] = v
     return out
+
+
+@njit(cache=True)
+def ring_significance(xy):  # pragma: no cover - compiled
+    """Douglas–Peucker significance of every vertex of a ring of n >= 4 vertices (``xy`` without its repeated
+    first vertex), as ``engine.geom.douglas_peucker.significance`` defines it: split at two far apart vertices
+    (the farthest from the first, then the farthest from that), each half's ``dp_significance``, the anchors
+    and the most significant other vertex ``inf`` (the minimal triangle)."""
+    n = xy.shape[0]
+    a = _farthest_from(xy, 0)
+    b = _farthest_from(xy, a)
+    if a == b:  # every vertex is the same point
+        b = (a + 1) % n
+    if b < a:
+        a, b = b, a
+    second = np.empty((n - b + a + 1, 2))
+    second[: n - b] = xy[b:]
+    second[n - b :] = xy[: a + 1]
+    sig = np.empty(n)
+    sig[a : b + 1] = dp_significance(xy[a : b + 1].copy())
+    sig2 = dp_significance(second)
+    for k in range(second.shape[0]):
+        sig[(b + k) % n] = sig2[k]
+    sig[a] = np.inf
+    sig[b] = np.inf
+    best = -1
+    for i in range(n):
+        if np.isfinite(sig[i]) and (best < 0 or sig[i] > sig[best]):
+            best = i
+    if best >= 0:
+        sig[best] = np.inf
+    return sig
+
+
+@njit(cache=True)
+def _farthest_from(xy, origin):  # pragma: no cover - compiled
+    """The first vertex of the largest squared distance from vertex ``origin`` (``np.argmax``'s choice: the
+    first NaN, if any)."""
+    best = 0
+    far = -1.0
+    for i in range(xy.shape[0]):
+        dx = xy[i, 0] - xy[origin, 0]
+        dy = xy[i, 1] - xy[origin, 1]
+        d = dx * dx + dy * dy
+        if np.isnan(d):
+            return i
+        if d > far:
+            far = d
+            best = i
+    return best

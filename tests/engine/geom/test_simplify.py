@@ -13,6 +13,7 @@ from numpy.testing import assert_array_equal
 
 from engine.errors import InvalidParameter
 from engine.geom.douglas_peucker import douglas_peucker, douglas_peucker_count, ring_anchors, significance
+from engine.geom.kernels import dp_significance
 
 HYPOTHESIS = settings(deadline=None, max_examples=60)
 
@@ -268,3 +269,39 @@ def test_dp_count_is_deterministic_on_ties() -> None:
     first = douglas_peucker_count(line, 3)
     for _ in range(3):
         assert_array_equal(douglas_peucker_count(line, 3), first)
+
+
+def numpy_ring_significance(xy: np.ndarray) -> np.ndarray:
+    """A ring's significance stated with NumPy: split at ring_anchors, DP of both halves, anchors and the most
+    significant other vertex kept always."""
+    n = len(xy)
+    a, b = ring_anchors(xy)
+    sig = np.empty(n)
+    sig[a : b + 1] = dp_significance(np.ascontiguousarray(xy[a : b + 1]))
+    sig[np.concatenate([np.arange(b, n), np.arange(0, a + 1)])] = dp_significance(np.concatenate([xy[b:], xy[: a + 1]]))
+    sig[a] = sig[b] = np.inf
+    finite = np.flatnonzero(np.isfinite(sig))
+    if len(finite):
+        sig[finite[np.argmax(sig[finite])]] = np.inf
+    return sig
+
+
+@settings(deadline=None, max_examples=300)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(4, 120),
+    repeats=st.lists(st.integers(0, 119), max_size=4),
+    spiky=st.booleans(),
+)
+def test_ring_significance_is_the_numpy_rule_bit_for_bit(seed: int, n: int, repeats: list[int], spiky: bool) -> None:
+    # Rings at UTM magnitudes, some with vertices at the same point (ties for the anchors and the triangle) or
+    # on a coarse grid (equal distances, equal significances).
+    rng = np.random.default_rng(seed)
+    angle = np.sort(rng.uniform(0.0, 2.0 * np.pi, n))
+    xy = np.column_stack([np.cos(angle), np.sin(angle)]) * rng.uniform(50.0, 500.0, (n, 1))
+    if spiky:
+        xy = np.round(xy / 100.0) * 100.0
+    xy += [650_000.0, 5_100_000.0]
+    for i in repeats:
+        xy[i % n] = xy[(i + 1) % n]
+    assert np.array_equal(significance(xy, closed=True), numpy_ring_significance(xy))
