@@ -22,8 +22,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.cluster.vq import kmeans2
-from scipy.optimize import OptimizeWarning, curve_fit
 
 from engine.ccsm.similarity import SimilarityReference
 from engine.geom.douglas_peucker import douglas_peucker
@@ -161,6 +159,8 @@ def assign_groups(
         labels = np.zeros(len(contours), dtype=np.intp)
         centres = scaled.mean(axis=0, keepdims=True)
     else:
+        from scipy.cluster.vq import kmeans2  # here: a process that only reads t tables never pays its import
+
         centres, labels = kmeans2(scaled, k, seed=seed, minit="++")
     references = []
     for g in range(len(centres)):
@@ -223,6 +223,8 @@ def fit_group_model(references: list[Contour], params: BuildParams) -> GroupMode
         p0 = (float(y[-1]), -1e-3, float(y[0] - y[-1]), -3.0 / span)
         # a, c >= 0 and b, d <= 0 make f non-increasing, so every fit can be inverted.
         bounds = ([0.0, -50.0, 0.0, -50.0], [10.0, 0.0, 10.0, 0.0])
+        from scipy.optimize import OptimizeWarning, curve_fit  # as kmeans2: only a build fits the model
+
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", OptimizeWarning)

@@ -21,13 +21,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
-from scipy.interpolate import BSpline, make_interp_spline
 
 from engine.errors import SurfaceFitError
 from engine.types import Coords
 
 if TYPE_CHECKING:
     from geomdl import BSpline as GeomdlBSpline
+    from scipy.interpolate import BSpline
 
 DEGREE = 3
 #: Heights of the wireframe rows on every characteristic link (paper: four points per link).
@@ -237,6 +237,10 @@ def fit_surface(initial: Coords, target: Coords, closed: bool) -> CCSurface:
     SurfaceFitError
         Too few samples, or a singular collocation system.
     """
+    # Imported here: a build without extra rows between samples (the default) never solves a spline, and
+    # SciPy's splines were a quarter of a second of every process's start.
+    from scipy.interpolate import BSpline, make_interp_spline
+
     params = fit_parameters(initial, target)
     data = np.concatenate([initial, target], axis=1)  # (N, 4): both boundary rows in one solve
     try:

@@ -18,12 +18,13 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NamedTuple, Protocol
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
 from urllib.parse import unquote, urlparse
 
-import httpx
-
 from engine.errors import SourceError
+
+if TYPE_CHECKING:
+    import httpx
 
 #: Tiles fetched at once (threads: the work is waiting on the network or the disk).
 FETCH_THREADS = 8
@@ -225,12 +226,14 @@ def open_tile_reader(location: str) -> TileReader:
     return FolderTemplate(str(Path(location).expanduser()))
 
 
-_clients: dict[int, httpx.Client] = {}
+_clients: dict[int, httpx.Client] = {}  # httpx is imported by the first fetch: a build from a file never needs it
 _clients_lock = threading.Lock()
 
 
 def _client() -> httpx.Client:
     """One HTTP client per process (it pools connections; worker processes make their own)."""
+    import httpx
+
     pid = os.getpid()
     with _clients_lock:
         if pid not in _clients:
@@ -246,6 +249,8 @@ def http_get(url: str, label: str, *, byte_range: tuple[int, int] | None = None)
     SourceError
         Not found, refused, or still failing after the last try; the message starts with ``label``.
     """
+    import httpx
+
     headers = {"Range": f"bytes={byte_range[0]}-{byte_range[1]}"} if byte_range is not None else {}
     problem = ""
     for attempt in range(TRIES):
