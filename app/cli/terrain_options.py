@@ -71,9 +71,13 @@ def default_tile_cache() -> Path:
 
 def names_a_source(text: str) -> bool:
     """True when ``text`` is a file, a URL or a tile source rather than a dataset id."""
+    if Path(text).is_file() or text.startswith(("http://", "https://")):
+        return True
+    if ":" not in text:  # a tile source names its encoding before a colon: a dataset id is told without the
+        return False  # tile reader's imports (PIL, rasterio), a fifth of a second of every export's start
     from engine.io.terrain_tiles import looks_like_encoding
 
-    return Path(text).is_file() or text.startswith(("http://", "https://")) or looks_like_encoding(text) is not None
+    return looks_like_encoding(text) is not None
 
 
 def open_source(text: str, bbox: str | None, dem_zoom: int | None, source_scale: float) -> Source:

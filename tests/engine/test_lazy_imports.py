@@ -54,3 +54,14 @@ def test_a_name_the_engine_does_not_have_is_an_attribute_error() -> None:
 
     with pytest.raises(AttributeError, match="no attribute 'simplify_everything'"):
         engine.simplify_everything  # noqa: B018
+
+
+def test_telling_a_dataset_id_from_a_source_loads_no_tile_reader() -> None:
+    loaded = modules_after(
+        "from app.cli.terrain_options import names_a_source\n"
+        "assert not names_a_source('bench') and names_a_source('terrarium:https://example.org/{z}/{x}/{y}.png')",
+        ("PIL.Image",),
+    )
+    assert loaded == ["PIL.Image"]  # asked about a tile source, it loads the reader; not for 'bench' alone
+    bench_only = "from app.cli.terrain_options import names_a_source\nnames_a_source('bench')"
+    assert modules_after(bench_only, ("PIL.Image",)) == []
