@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from engine.ccsm.similarity import SimilarityReference
-from engine.geom.douglas_peucker import douglas_peucker
+from engine.geom.douglas_peucker import significance
 from engine.geom.polyline import path_length
 from engine.params import BuildParams
 from engine.tolerances import tolerance_for_scale
@@ -200,9 +200,11 @@ def reference_similarities(
 ) -> NDArray[np.float64]:
     """Sim(L0, DP(L0, 0.1 mm x S)) of one reference contour at each scale S."""
     probe = SimilarityReference.of(reference.coords, reference.closed, params.similarity_spacing_m)
+    # DP at a tolerance keeps the vertices more significant than it: one significance serves every scale.
+    sig = significance(reference.coords, reference.closed)
     sims = []
     for s in scales:
-        keep = douglas_peucker(reference.coords, tolerance_for_scale(s), reference.closed)
+        keep = np.flatnonzero(sig > tolerance_for_scale(s))
         sims.append(probe.similarity(reference.coords[keep]))
     return np.array(sims)
 
