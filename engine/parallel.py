@@ -92,7 +92,20 @@ def _set_up_worker() -> None:
 
 def local_pool(workers: int) -> Executor:
     """A process pool of ``workers`` processes, each with one BLAS thread."""
+    _start_numba_here()
     return ProcessPoolExecutor(max_workers=workers, initializer=_set_up_worker)
+
+
+def _start_numba_here() -> None:
+    """Start numba's compiler in this process (its first kernel would anyway): the pool's workers are forked from
+    it and inherit it, where each had spent a sixth of a second starting its own before its first task's kernel.
+    A numba without this entry point only costs the workers that time again."""
+    try:
+        from numba.core.registry import cpu_target
+
+        cpu_target.target_context.refresh()
+    except (ImportError, AttributeError):  # pragma: no cover - a numba that moved it
+        pass
 
 
 @contextmanager

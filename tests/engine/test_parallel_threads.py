@@ -83,3 +83,24 @@ def test_a_pool_loaded_after_the_first_task_is_limited_too(tmp_path: Path) -> No
     assert {n for _, n in seen["outside"]} == {2}
     assert [api for api, _ in seen["inside"]] == [api for api, _ in seen["outside"]]
     assert {n for _, n in seen["inside"]} == {1}, seen["inside"]
+
+
+def test_a_local_pools_workers_inherit_a_started_numba() -> None:
+    # In a fresh interpreter (this one has long started numba): a worker forked by local_pool finds numba's
+    # implementations loaded before it calls any kernel, as its parent loaded them before forking it.
+    code = textwrap.dedent(
+        """
+        import sys
+        from engine.parallel import local_pool
+
+        def numba_started():
+            return "numba.np.arraymath" in sys.modules
+
+        assert not numba_started()
+        with local_pool(2) as pool:
+            print(pool.submit(numba_started).result())
+        """
+    )
+    done = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "True"
