@@ -152,6 +152,8 @@ class KeptChunk:
         (k, 4) box of each surface (:func:`~engine.ccsm.blocks.surface_boxes`).
     pieces
         Their pieces (:func:`~engine.ccsm.blocks.piece_boxes`).
+    factors
+        The tolerance factor each surface was built with (``CCS.tolerance_factor``).
     """
 
     built: list[int]
@@ -159,6 +161,7 @@ class KeptChunk:
     failed: list[BadFeature]
     bounds: NDArray[np.float64]
     pieces: PieceBoxes
+    factors: list[float]
 
 
 def _build_kept_chunk(
@@ -167,11 +170,13 @@ def _build_kept_chunk(
     params: BuildParams,
     model: ScaleModel,
     pickle_surfaces: bool,
+    factors: Sequence[float] | None = None,
 ) -> KeptChunk:
-    """The first build of a chunk, as a worker sends it back (:class:`KeptChunk`): the contours come as the
-    reader keeps them and are opened here, the surfaces go back as the spool keeps them, so the build process
-    neither opens nor pickles either (``engine.payloads``)."""
-    results = _build_chunk(contours, labels, params, model)
+    """A chunk built (at ``factors``, the repair's rebuilds; else the first build), as a worker sends it back
+    (:class:`KeptChunk`): the contours come as the reader keeps them and are opened here, the surfaces go back
+    as the spool keeps them with their boxes and pieces, so the build process neither opens nor pickles either,
+    nor measures them (``engine.payloads``)."""
+    results = _build_chunk(contours, labels, params, model, factors)
     surfaces = [r for r in results if isinstance(r, CCS)]
     return KeptChunk(
         built=[k for k, r in enumerate(results) if isinstance(r, CCS)],
@@ -179,6 +184,7 @@ def _build_kept_chunk(
         failed=[r for r in results if isinstance(r, BadFeature)],
         bounds=surface_boxes(surfaces),
         pieces=piece_boxes(surfaces),
+        factors=[s.tolerance_factor for s in surfaces],
     )
 
 
@@ -451,16 +457,15 @@ def resolve_crossings(
             if factors[i] > new_factor:
                 todo.append((i, new_factor))
         rebuilt_now: set[int] = set()
-        batch: list[tuple[int, CCS]] = []
-        for (i, _), rebuilt in zip(todo, _rebuild(inputs, labels, todo, params, model, executor), strict=True):
-            if isinstance(rebuilt, CCS):
-                batch.append((i, rebuilt))
-                factors[i] = rebuilt.tolerance_factor
-                changed.add(i)
-                rebuilt_now.add(i)
-            if len(batch) >= REPAIR_KEEP_BATCH:
-                _keep(batch, spool, boxes, pieces)
-        _keep(batch, spool, boxes, pieces)
+        for numbers, chunk in _rebuild(inputs, labels, todo, params, model, executor, spool.keeps_pickles):
+            # A contour whose rebuild failed keeps its surface; the others replace theirs, as built.
+            kept = [numbers[k] for k in chunk.built]
+            spool.put_payloads(zip(kept, chunk.payloads, strict=True))
+            boxes[kept] = chunk.bounds
+            pieces.put_boxes(kept, chunk.pieces)
+            factors[kept] = chunk.factors
+            changed.update(kept)
+            rebuilt_now.update(kept)
         cache.forget(rebuilt_now)  # replaced in the spool
         # Only the rebuilt contours can have made new crossings (or still have old ones).
         involved = (
@@ -473,23 +478,6 @@ def resolve_crossings(
     return len(changed)
 
 
-#: Rebuilt surfaces kept (spooled, boxed and cut into pieces) at a time: one by one, the fixed cost of each
-#: step was most of it when a round rebuilds thousands.
-REPAIR_KEEP_BATCH = 64
-
-
-def _keep(batch: list[tuple[int, CCS]], spool: Spool, boxes: NDArray[np.float64], pieces: PieceIndex) -> None:
-    """Put rebuilt surfaces (number, surface) in the spool, the boxes and the pieces; empties ``batch``."""
-    if not batch:
-        return
-    numbers = [i for i, _ in batch]
-    surfaces = [s for _, s in batch]
-    spool.put_many(batch)
-    boxes[numbers] = surface_boxes(surfaces)
-    pieces.put(numbers, surfaces)
-    batch.clear()
-
-
 def _rebuild(
     inputs: Sequence[Contour],
     labels: Sequence[int],
@@ -497,20 +485,25 @@ def _rebuild(
     params: BuildParams,
     model: ScaleModel,
     executor: Executor | None,
-) -> Iterator[CCS | BadFeature]:
-    """Rebuild contours ``todo`` = (index, tolerance factor), in chunks on ``executor``; results in order, as
-    they come (a round can rebuild thousands: neither their inputs nor their surfaces are held at once)."""
+    pickle_surfaces: bool,
+) -> Iterator[tuple[list[int], KeptChunk]]:
+    """Rebuild contours ``todo`` = (index, tolerance factor), in chunks on ``executor``: each chunk's indices and
+    its surfaces as the spool keeps them, as they come (a round can rebuild thousands: neither their inputs nor
+    their surfaces are held at once, and the build process neither opens nor measures them)."""
+    chunks = [list(todo[k : k + REPAIR_CHUNK]) for k in range(0, len(todo), REPAIR_CHUNK)]
     tasks = (
         (
-            contour_payloads(inputs, [i for i, _ in todo[k : k + REPAIR_CHUNK]]),
-            [labels[i] for i, _ in todo[k : k + REPAIR_CHUNK]],
+            contour_payloads(inputs, [i for i, _ in chunk]),
+            [labels[i] for i, _ in chunk],
             params,
             model,
-            [f for _, f in todo[k : k + REPAIR_CHUNK]],
+            pickle_surfaces,
+            [f for _, f in chunk],
         )
-        for k in range(0, len(todo), REPAIR_CHUNK)
+        for chunk in chunks
     )
-    return (r for chunk in map_ordered(executor, _build_chunk, tasks) for r in chunk)
+    for chunk, kept in zip(chunks, map_ordered(executor, _build_kept_chunk, tasks), strict=True):
+        yield [i for i, _ in chunk], kept
 
 
 def _next_factor(factor: float) -> float:

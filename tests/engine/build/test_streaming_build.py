@@ -296,7 +296,8 @@ def test_the_build_process_forwards_contours_and_surfaces_without_opening_them(t
     # Issue 26: where the build process only passes a contour on (to a chunk's or a shard's task) or a surface
     # (from a chunk's task to the spool), opening and pickling it again was serial work on the hub of the build.
     # It opens only the scale model's reference contours (the survey checks and measures every contour on the
-    # pool), and pickles only the repair's rebuilds.
+    # pool), and pickles no surface: the repair's rebuilds come back pickled, boxed and cut into pieces too.
+    import engine.ccsm.build as ccsm_build
     import engine.io.cleaning as cleaning
     import engine.scratch as scratch
     from engine.ccsm.ccs import CCS
@@ -318,17 +319,26 @@ def test_the_build_process_forwards_contours_and_surfaces_without_opening_them(t
             pickled_factors.append(obj.tolerance_factor)
         return pickled(obj)
 
+    repaired: list[int] = []
+    resolve_crossings = ccsm_build.resolve_crossings
+
+    def counting_repairs(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        repaired.append(resolve_crossings(*args, **kwargs))
+        return repaired[-1]
+
     monkeypatch.setattr(scratch.ReadScratch, "read_range", counting_read_range)
     monkeypatch.setattr(scratch, "pickled", counting_pickled)
+    monkeypatch.setattr(ccsm_build, "resolve_crossings", counting_repairs)
     store = CCSStore(tmp_path / "s.sqlite")
     info, _ = build_dataset(store, small_dem(tmp_path), workers=2)
     contours = info.n_contours
     assert contours > 2 * 64, "more than two chunks"
     # Only the scale model's reference contours are opened here: no contour for its check, its size and shape,
-    # its chunk, its rebuilds or its shard; only rebuilt surfaces (a finer target, factor < 1) are pickled here.
+    # its chunk, its rebuilds or its shard; no surface is pickled here, though the repair rebuilt some.
     references = BuildParams().groups * REFERENCES_PER_GROUP
     assert 0 < len(opened) <= references, (len(opened), contours)
-    assert all(f < 1.0 for f in pickled_factors), sorted(set(pickled_factors))
+    assert repaired and repaired[0] > 0, repaired
+    assert pickled_factors == [], sorted(set(pickled_factors))
     # What the workers sent is what a build in one process stores.
     alone = CCSStore(tmp_path / "alone.sqlite")
     build_dataset(alone, small_dem(tmp_path), workers=1)
