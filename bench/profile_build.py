@@ -49,7 +49,7 @@ PHASES = [
     ("CCS of each contour (+ repair's rebuilds)", "engine/ccsm/ccs.py", "build_ccs"),
     ("  similarity tables", "engine/ccsm/similarity.py", "slice_similarities"),
     ("  correspondence", "engine/ccsm/ccs.py", "_correspondence"),
-    ("  surface fit", "engine/ccsm/surface.py", "fit_parameters"),
+    ("  surface fit check", "engine/ccsm/surface.py", "check_fit"),
     ("  surface rows", "engine/ccsm/surface.py", "surface_rows"),
     ("scale model", "engine/ccsm/regression.py", "fit_scale_model"),
     ("crossing repair (with its rebuilds)", "engine/ccsm/build.py", "resolve_crossings"),
