@@ -35,6 +35,7 @@ from engine.ccsm.topology import (
     new_contact_pairs,
     per_piece,
     piece_ranges,
+    touching_lines,
 )
 from engine.heap import release_free_memory
 from engine.parallel import map_ordered
@@ -339,34 +340,63 @@ class NearSlice(NamedTuple):
 NearItem = SurfaceRows | bytes | FileSlice | NearSlice
 
 
+class BlockContacts(NamedTuple):
+    """What a block's task finds: the pairs (i, j), i < j, of local indices whose slices meet, and for those of
+    them whose two whole surfaces the task had, whether their input lines already touch (the input's touch test,
+    :class:`~engine.ccsm.topology.InputTouches`, on their base rows)."""
+
+    pairs: set[tuple[int, int]]
+    touching: dict[tuple[int, int], bool]
+
+
 def block_contacts(
     near: Sequence[NearItem], own: Sequence[int], ladder: NDArray[np.float64], steps: Sequence[int]
-) -> set[tuple[int, int]]:
+) -> BlockContacts:
     """Pairs (i, j), i < j, of local indices (into ``near``) whose slices meet at some checked step, each with
     an ``own`` surface in it. The surfaces come as :func:`_block_tasks` sends them: the block's own as the
     spool keeps them, or where they lie in its file (read and opened here, in the worker), the others cut to
     their near stretches, or where their whole surface lies with the rows to cut here.
+
+    Where both surfaces of a pair came whole (or where they lie), their input lines' touch test is made here too,
+    so the build process need not read them for it.
 
     Raises
     ------
     FileUnreachable
         This worker cannot read the spool's file: the task goes again with its surfaces.
     """
-    pairs = new_contact_pairs(near_surfaces(near), ladder, steps, set(own))
+    surfaces, wholes = _near_and_whole(near)
+    pairs = new_contact_pairs(surfaces, ladder, steps, set(own))
+    asked = sorted((a, b) for a, b in pairs if wholes[a] is not None and wholes[b] is not None)
+    touching: dict[tuple[int, int], bool] = {}
+    if asked:
+        numbers = sorted({k for pair in asked for k in pair})
+        at = {k: n for n, k in enumerate(numbers)}
+        bases = [cast("CCS", wholes[k]).base for k in numbers]
+        hits = touching_lines(bases, [at[a] for a, _ in asked], [at[b] for _, b in asked])
+        touching = dict(zip(asked, hits.tolist(), strict=True))
     release_free_memory()  # a worker's next block starts from what this one freed
-    return pairs
+    return BlockContacts(pairs, touching)
 
 
 def near_surfaces(near: Sequence[NearItem]) -> list[SurfaceRows]:
     """A block task's surfaces as the contact check reads them: read where they lie in the spool's file (each
     file opened once), opened, and the near ones cut to their stretches. The surfaces a worker opens from the
     file are kept for its next blocks (:data:`OPENED_NEAR`)."""
+    return _near_and_whole(near)[0]
+
+
+def _near_and_whole(near: Sequence[NearItem]) -> tuple[list[SurfaceRows], list[CCS | None]]:
+    """:func:`near_surfaces`, and each item's whole surface where the task gave it whole or where it lies
+    (None for a stretch cut in the build process)."""
     wanted = [item.whole if isinstance(item, NearSlice) else item for item in near]
-    surfaces = OPENED_NEAR.opened(wanted)
-    return [
+    opened_items = OPENED_NEAR.opened(wanted)
+    surfaces = [
         _stretch(cast("CCS", surface), item.first, item.last) if isinstance(item, NearSlice) else surface
-        for item, surface in zip(near, surfaces, strict=True)
+        for item, surface in zip(near, opened_items, strict=True)
     ]
+    wholes = [None if isinstance(surface, NearStretch) else cast("CCS", surface) for surface in opened_items]
+    return surfaces, wholes
 
 
 #: Bytes of surfaces a worker keeps opened from the spool's file between its block tasks.
@@ -638,10 +668,13 @@ def find_crossings_by_block(
         budget=BLOCK_TASK_BUDGET_BYTES,
         refetch=_with_surfaces(spool),
     )
-    for block, pairs in zip(blocks, checks, strict=True):
+    for block, (pairs, touching) in zip(blocks, checks, strict=True):
         # Two stretches of one contour meet where they join (the input touch test would say so too).
         met = {(int(block.near[a]), int(block.near[b])) for a, b in pairs} - {(i, i) for i in block.near.tolist()}
-        touches.learn(met)  # the block's pairs asked together: each input line read once
+        # The worker's answers first (a pair's first answer is kept), then the rest asked together here: each
+        # input line read once.
+        touches.record({(int(block.near[a]), int(block.near[b])): hit for (a, b), hit in touching.items()})
+        touches.learn(met)
         for pair in met:
             if pair not in touches:
                 found.update(pair)

@@ -359,8 +359,14 @@ class InputTouches:
             return False
         i, j = pair
         if (i, j) not in self._known:
-            self._known[(i, j)] = bool(_touching([self.lines[i], self.lines[j]], [0], [1])[0])
+            self._known[(i, j)] = bool(touching_lines([self.lines[i], self.lines[j]], [0], [1])[0])
         return self._known[(i, j)]
+
+    def record(self, answers: dict[tuple[int, int], bool]) -> None:
+        """Take answers made elsewhere (a block's worker, on the same base rows); a pair already answered keeps
+        its first answer, as :meth:`learn` keeps it."""
+        for pair, hit in answers.items():
+            self._known.setdefault(pair, bool(hit))
 
     def learn(self, pairs: Iterable[tuple[int, int]]) -> None:
         """Ask these pairs now, together: each line of them is read once (all at once where ``lines`` has a
@@ -372,12 +378,12 @@ class InputTouches:
             take = getattr(self.lines, "take", None)
             lines = take(numbers) if take is not None else [self.lines[n] for n in numbers]
             at = {n: k for k, n in enumerate(numbers)}
-            hits = _touching(lines, [at[i] for i, _ in batch], [at[j] for _, j in batch])
+            hits = touching_lines(lines, [at[i] for i, _ in batch], [at[j] for _, j in batch])
             for pair, hit in zip(batch, hits.tolist(), strict=True):
                 self._known[pair] = bool(hit)
 
 
-def _touching(lines: Sequence[Coords], p: Sequence[int], q: Sequence[int]) -> NDArray[np.bool_]:
+def touching_lines(lines: Sequence[Coords], p: Sequence[int], q: Sequence[int]) -> NDArray[np.bool_]:
     """Whether lines ``p[k]`` and ``q[k]`` of ``lines`` are within ``INPUT_TOUCH_M`` of each other, for every k."""
     sizes = np.array([len(line) for line in lines], dtype=np.intp)
     first = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)

@@ -330,23 +330,45 @@ def test_blocks_checked_on_a_pool_that_reads_the_spool_find_the_contacts_of_one_
     here = find_crossings_by_block(_disk_spool_of(surfaces, tmp_path), boxes, pieces, ladder, steps, per_block=4)
     assert len(here) > 10
     spool = _disk_spool_of(surfaces, tmp_path)
-    # The build process reads a surface only for the input's touch test of a pair found (its base rows).
-    reading_bases, read_bases, read_payloads = [False], spool.get, spool.get_payloads
+    # The build process reads no surface: not a block's, nor the base rows of a pair found for the input's touch
+    # test (the workers answer it, having both whole surfaces).
 
-    def bases(indices):  # noqa: ANN001, ANN202 - the spool's
-        reading_bases[0] = True
-        try:
-            return read_bases(indices)
-        finally:
-            reading_bases[0] = False
+    def read_here(indices):  # noqa: ANN001, ANN202 - the spool's
+        raise AssertionError(f"surfaces {indices} were read in the build process")
 
-    def payloads(indices):  # noqa: ANN001, ANN202 - the spool's
-        assert reading_bases[0], "a block's surfaces were read in the build process"
-        return read_payloads(indices)
-
-    spool.get, spool.get_payloads = bases, payloads
+    spool.get, spool.get_payloads = read_here, read_here
     with local_pool(2) as pool:
         assert find_crossings_by_block(spool, boxes, pieces, ladder, steps, executor=pool, per_block=4) == here
+
+
+def test_the_workers_answers_to_the_input_touch_test_are_the_build_process_ones(
+    tmp_path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Random wiggly lines: many cross one another already in the input (those pairs are left alone).
+    from engine.ccsm import topology
+    from engine.parallel import local_pool
+
+    surfaces = random_lines(200, seed=3)
+    ladder = np.geomspace(50_000.0, 500_000.0, 5)
+    for s in surfaces:
+        s.t_at_scale = np.linspace(0.0, 1.0, len(ladder))
+    steps = list(range(len(ladder) - 1))
+    boxes = surface_boxes(surfaces)
+    pieces = PieceIndex()
+    pieces.put(range(len(surfaces)), surfaces)
+
+    def found(executor=None):  # noqa: ANN001, ANN202
+        spool = _disk_spool_of(surfaces, tmp_path)
+        return find_crossings_by_block(spool, boxes, pieces, ladder, steps, executor=executor, per_block=4)
+
+    with local_pool(2) as pool:
+        on_workers = found(pool)
+    monkeypatch.setattr(topology.InputTouches, "record", lambda self, answers: None)  # every pair asked here
+    asked_here = found()
+    assert on_workers == asked_here
+    # The answers matter on this data: some pairs found do touch in the input, and are left alone.
+    monkeypatch.setattr(topology.InputTouches, "__contains__", lambda self, pair: False)
+    assert found() > asked_here
 
 
 def test_blocks_whose_workers_cannot_read_the_spool_are_sent_again_with_their_surfaces(
