@@ -18,7 +18,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from engine.errors import InvalidParameter
-from engine.geom.kernels import discrete_frechet
+from engine.geom.kernels import discrete_frechet, resampled
 from engine.geom.polyline import closed_path, path_length, resample_by_arclength
 from engine.types import Coords
 
@@ -126,52 +126,31 @@ class SimilarityReference:
         return out
 
 
-# numba's cache keys a kernel on its own file only: it keeps the compiled discrete_frechet it was built with
-# until this file changes, so a change of that kernel comes with a touch here.
+# numba's cache keys a kernel on its own file only: it keeps the compiled discrete_frechet and resampled it was
+# built with until this file changes, so a change of either comes with a touch here.
 @njit(cache=True)
 def _slice_similarities(samples, length, base, top, ts, out):  # pragma: no cover - compiled
     """``out[k]`` = 1 - dF(samples, slice(ts[k]) resampled to len(samples) points) / length.
 
-    Step by step what ``SimilarityReference.similarity`` does with NumPy (``resample_by_arclength``: arc
-    length by ``hypot`` and a running sum, targets ``i * (L / (n - 1))`` with the last at ``L``, ``np.interp``'s
-    rule; the diagonal coupling as the Fréchet bound), so the results agree to the last bit or nearly.
+    Step by step what ``SimilarityReference.similarity`` does with NumPy (each slice resampled by
+    ``resample_by_arclength``'s own kernel; the diagonal coupling as the Fréchet bound), so the results agree to
+    the last bit.
     """
     n = samples.shape[0]
     m = base.shape[0]
     path = np.empty((m, 2))
-    cum = np.empty(m)
-    resampled = np.empty((n, 2))
     for k in range(ts.shape[0]):
         t = ts[k]
         for i in range(m):
             path[i, 0] = (1.0 - t) * base[i, 0] + t * top[i, 0]
             path[i, 1] = (1.0 - t) * base[i, 1] + t * top[i, 1]
-        cum[0] = 0.0
-        for i in range(1, m):
-            cum[i] = cum[i - 1] + np.hypot(path[i, 0] - path[i - 1, 0], path[i, 1] - path[i - 1, 1])
-        total = cum[m - 1]
-        step = total / (n - 1)
-        j = 0
+        slice_points = resampled(path, n)
         bound2 = 0.0
         for i in range(n):
-            x = i * step if i < n - 1 else total
-            while j + 1 < m and cum[j + 1] <= x:
-                j += 1
-            for c in range(2):
-                if j == m - 1 or cum[j] == x:
-                    v = path[j, c]
-                else:
-                    slope = (path[j + 1, c] - path[j, c]) / (cum[j + 1] - cum[j])
-                    v = slope * (x - cum[j]) + path[j, c]
-                    if np.isnan(v):
-                        v = slope * (x - cum[j + 1]) + path[j + 1, c]
-                        if np.isnan(v) and path[j, c] == path[j + 1, c]:
-                            v = path[j, c]
-                resampled[i, c] = v
-            dx = samples[i, 0] - resampled[i, 0]
-            dy = samples[i, 1] - resampled[i, 1]
+            dx = samples[i, 0] - slice_points[i, 0]
+            dy = samples[i, 1] - slice_points[i, 1]
             bound2 = max(bound2, dx**2 + dy**2)
-        out[k] = 1.0 - discrete_frechet(samples, resampled, np.sqrt(bound2)) / length
+        out[k] = 1.0 - discrete_frechet(samples, slice_points, np.sqrt(bound2)) / length
 
 
 def similarity(
