@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from engine.errors import InvalidParameter
-from engine.geom.kernels import dp_significance, ring_significance
+from engine.geom.kernels import dp_significance, ring_anchor_pair, ring_significance
 from engine.types import Coords
 
 IndexArray = NDArray[np.intp]
@@ -35,12 +35,8 @@ def ring_anchors(coords: Coords) -> tuple[int, int]:
     (a, b)
         Vertex indices with ``a < b``.
     """
-    xy = _as_coords(coords)
-    a = int(np.argmax(np.sum((xy - xy[0]) ** 2, axis=1)))
-    b = int(np.argmax(np.sum((xy - xy[a]) ** 2, axis=1)))
-    if a == b:  # every vertex is the same point
-        b = (a + 1) % len(xy)
-    return (a, b) if a < b else (b, a)
+    a, b = ring_anchor_pair(_as_coords(coords))
+    return int(a), int(b)
 
 
 def significance(coords: Coords, closed: bool = False) -> NDArray[np.float64]:

@@ -353,12 +353,7 @@ def ring_significance(xy):  # pragma: no cover - compiled
     (the farthest from the first, then the farthest from that), each half's ``dp_significance``, the anchors
     and the most significant other vertex ``inf`` (the minimal triangle)."""
     n = xy.shape[0]
-    a = _farthest_from(xy, 0)
-    b = _farthest_from(xy, a)
-    if a == b:  # every vertex is the same point
-        b = (a + 1) % n
-    if b < a:
-        a, b = b, a
+    a, b = ring_anchor_pair(xy)
     second = np.empty((n - b + a + 1, 2))
     second[: n - b] = xy[b:]
     second[n - b :] = xy[: a + 1]
@@ -376,6 +371,17 @@ def ring_significance(xy):  # pragma: no cover - compiled
     if best >= 0:
         sig[best] = np.inf
     return sig
+
+
+@njit(cache=True)
+def ring_anchor_pair(xy):  # pragma: no cover - compiled
+    """Two far apart vertices ``a < b`` of a ring of n >= 2 vertices, where it is split for Douglas–Peucker: the
+    vertex farthest from the first, then the vertex farthest from that one (the next one if all coincide)."""
+    a = _farthest_from(xy, 0)
+    b = _farthest_from(xy, a)
+    if a == b:  # every vertex is the same point
+        b = (a + 1) % xy.shape[0]
+    return (a, b) if a < b else (b, a)
 
 
 @njit(cache=True)

@@ -272,10 +272,12 @@ def test_dp_count_is_deterministic_on_ties() -> None:
 
 
 def numpy_ring_significance(xy: np.ndarray) -> np.ndarray:
-    """A ring's significance stated with NumPy: split at ring_anchors, DP of both halves, anchors and the most
-    significant other vertex kept always."""
+    """A ring's significance stated with NumPy: split at two far apart vertices, DP of both halves, anchors and
+    the most significant other vertex kept always."""
     n = len(xy)
-    a, b = ring_anchors(xy)
+    a = int(np.argmax(np.sum((xy - xy[0]) ** 2, axis=1)))  # the farthest from the first, then from that one
+    b = int(np.argmax(np.sum((xy - xy[a]) ** 2, axis=1)))
+    a, b = sorted((a, b if a != b else (a + 1) % n))
     sig = np.empty(n)
     sig[a : b + 1] = dp_significance(np.ascontiguousarray(xy[a : b + 1]))
     sig[np.concatenate([np.arange(b, n), np.arange(0, a + 1)])] = dp_significance(np.concatenate([xy[b:], xy[: a + 1]]))
