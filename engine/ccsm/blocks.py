@@ -33,9 +33,9 @@ from engine.ccsm.topology import (
     SurfaceRows,
     concatenated_ranges,
     new_contact_pairs,
+    pairs_touching,
     per_piece,
     piece_ranges,
-    touching_lines,
 )
 from engine.heap import release_free_memory
 from engine.parallel import map_ordered
@@ -368,13 +368,7 @@ def block_contacts(
     surfaces, wholes = _near_and_whole(near)
     pairs = new_contact_pairs(surfaces, ladder, steps, set(own))
     asked = sorted((a, b) for a, b in pairs if wholes[a] is not None and wholes[b] is not None)
-    touching: dict[tuple[int, int], bool] = {}
-    if asked:
-        numbers = sorted({k for pair in asked for k in pair})
-        at = {k: n for n, k in enumerate(numbers)}
-        bases = [cast("CCS", wholes[k]).base for k in numbers]
-        hits = touching_lines(bases, [at[a] for a, _ in asked], [at[b] for _, b in asked])
-        touching = dict(zip(asked, hits.tolist(), strict=True))
+    touching = pairs_touching(asked, lambda numbers: [cast("CCS", wholes[k]).base for k in numbers])
     release_free_memory()  # a worker's next block starts from what this one freed
     return BlockContacts(pairs, touching)
 

@@ -6,7 +6,7 @@ that overlaps everything, its pieces do not, so the index rejects almost every c
 
 from __future__ import annotations
 
-from collections.abc import Container, Iterable, Sequence
+from collections.abc import Callable, Container, Iterable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
@@ -359,7 +359,7 @@ class InputTouches:
             return False
         i, j = pair
         if (i, j) not in self._known:
-            self._known[(i, j)] = bool(touching_lines([self.lines[i], self.lines[j]], [0], [1])[0])
+            self._known[(i, j)] = bool(_touching([self.lines[i], self.lines[j]], [0], [1])[0])
         return self._known[(i, j)]
 
     def record(self, answers: dict[tuple[int, int], bool]) -> None:
@@ -372,18 +372,25 @@ class InputTouches:
         """Ask these pairs now, together: each line of them is read once (all at once where ``lines`` has a
         ``take(indices)``, as the spool's base rows do), however many pairs it is in."""
         todo = sorted({pair for pair in pairs if pair not in self._known})
+        read = getattr(self.lines, "take", None) or (lambda numbers: [self.lines[n] for n in numbers])
         for k in range(0, len(todo), LEARN_BATCH):
-            batch = todo[k : k + LEARN_BATCH]
-            numbers = sorted({n for pair in batch for n in pair})
-            take = getattr(self.lines, "take", None)
-            lines = take(numbers) if take is not None else [self.lines[n] for n in numbers]
-            at = {n: k for k, n in enumerate(numbers)}
-            hits = touching_lines(lines, [at[i] for i, _ in batch], [at[j] for _, j in batch])
-            for pair, hit in zip(batch, hits.tolist(), strict=True):
-                self._known[pair] = bool(hit)
+            self._known.update(pairs_touching(todo[k : k + LEARN_BATCH], read))
 
 
-def touching_lines(lines: Sequence[Coords], p: Sequence[int], q: Sequence[int]) -> NDArray[np.bool_]:
+def pairs_touching(
+    pairs: Sequence[tuple[int, int]], read: Callable[[list[int]], Sequence[Coords]]
+) -> dict[tuple[int, int], bool]:
+    """Whether the input lines of each pair are within ``INPUT_TOUCH_M`` of each other; ``read(numbers)`` gives
+    the lines of ascending ``numbers``, each line read once however many pairs it is in."""
+    if not pairs:
+        return {}
+    numbers = sorted({n for pair in pairs for n in pair})
+    at = {n: k for k, n in enumerate(numbers)}
+    hits = _touching(read(numbers), [at[i] for i, _ in pairs], [at[j] for _, j in pairs])
+    return {pair: bool(hit) for pair, hit in zip(pairs, hits.tolist(), strict=True)}
+
+
+def _touching(lines: Sequence[Coords], p: Sequence[int], q: Sequence[int]) -> NDArray[np.bool_]:
     """Whether lines ``p[k]`` and ``q[k]`` of ``lines`` are within ``INPUT_TOUCH_M`` of each other, for every k."""
     sizes = np.array([len(line) for line in lines], dtype=np.intp)
     first = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
